@@ -1,0 +1,203 @@
+"""Assemble the seated-human Diagram.
+
+    excitation --a--> seat inertial load --+
+    plant --state--> passive joints -------+
+                 --> joint PID ------------+--> sum --> plant.applied_generalized_force
+                 --> shear restraints -----+
+                 --> head-in-space --------+
+    plant --state--> body channels (+ seat displacement) --> "channels"
+
+`build_diagram(params, ...)` returns an `EhmDiagram` holding the Diagram and
+handles to every subsystem.  Without a signal, the diagram exports the
+input ports ``seat_acceleration`` and ``seat_displacement`` (3 each) so it
+can be driven or linearized; with one, a `SeatExcitation` drives them.
+Exported outputs: ``channels`` (30), ``seat_forces`` (12), ``state``
+(plant [q; v]), ``joint_torques`` (24 gimbal torques of the PID),
+``his_torque`` (3), ``seat_acceleration``, ``seat_displacement``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from pydrake.systems.framework import Diagram, DiagramBuilder
+from pydrake.systems.primitives import Adder, PassThrough, VectorLogSink
+
+from .model.anthropometry import REFERENCE, BodyMeasures
+from .model.plant import HumanPlant, add_seated_human, passive_stiffness_vector, pid_vectors
+from .params import ModelParams, apply_variant
+from .signals import SeatSignal
+from .systems.excitation import SeatExcitation
+from .systems.his import HeadInSpace
+from .systems.joints import JointPid, PassiveJoints
+from .systems.outputs import (
+    CHANNEL_NAMES,
+    SEGMENTS,
+    BodyChannels,
+    DivergenceGuard,
+    SeatForces,
+)
+from .systems.seat import (
+    SEAT_PART_NAMES,
+    SeatInertialLoad,
+    ShearRestraints,
+    restraint_parameters,
+    restraint_points,
+)
+
+SEAT_FORCE_NAMES = tuple(f"{p}_f{a}" for p in SEAT_PART_NAMES for a in "xyz")
+
+
+@dataclass
+class EhmDiagram:
+    """The built diagram and handles to its parts."""
+
+    diagram: Diagram
+    hp: HumanPlant
+    params: ModelParams
+    variant: str
+    measures: BodyMeasures
+    systems: dict = field(default_factory=dict)
+    loggers: dict = field(default_factory=dict)
+    signal: SeatSignal | None = None
+
+    @property
+    def plant(self):
+        return self.hp.plant
+
+    def plant_context(self, root_context):
+        return self.hp.plant.GetMyContextFromRoot(root_context)
+
+    def subcontext(self, name: str, root_context):
+        return self.systems[name].GetMyContextFromRoot(root_context)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.hp.layout.names
+
+
+def _marker_list(hp: HumanPlant):
+    plant = hp.plant
+    out = []
+    for seg in SEGMENTS:
+        frame = plant.GetFrameByName(f"{seg}_marker", hp.human)
+        out.append((frame.body().name(), frame.GetFixedPoseInBodyFrame().translation()))
+    return out
+
+
+def build_diagram(
+    params: ModelParams,
+    measures: BodyMeasures = REFERENCE,
+    signal: SeatSignal | None = None,
+    variant: str = "default",
+    log_period: float | None = None,
+    guard: bool = True,
+) -> EhmDiagram:
+    """Build the closed-loop diagram of the seated human on its seat.
+
+    Parameters
+    ----------
+    params : model parameters (see `ehm_drake.params`); `variant` is applied.
+    measures : anthropometry of the body (default: 50th-percentile male).
+    signal : seat excitation to play; None exports the seat input ports.
+    variant : "default", "no-integrator" or "high-stiffness".
+    log_period : if given, VectorLogSinks record the channels, seat motion,
+        seat forces and torques at this period (s).
+    guard : add the `DivergenceGuard` (blow-up detection).
+    """
+    params = apply_variant(params, variant)
+    h = params.simulation.time_step_s
+    builder = DiagramBuilder()
+    hp = add_seated_human(builder, params, measures)
+    plant = hp.plant
+    layout = hp.layout
+    sys = {}
+
+    # Seat motion source (or exported inputs).
+    if signal is not None:
+        if abs(signal.time_step - h) > 1e-12:
+            raise ValueError(f"signal time step {signal.time_step} differs from the model's {h}")
+        exc = builder.AddNamedSystem("seat_excitation", SeatExcitation(signal))
+        accel_out = exc.GetOutputPort("seat_acceleration")
+        disp_out = exc.GetOutputPort("seat_displacement")
+        sys["seat_excitation"] = exc
+    else:
+        a_in = builder.AddNamedSystem("seat_acceleration_input", PassThrough(3))
+        d_in = builder.AddNamedSystem("seat_displacement_input", PassThrough(3))
+        builder.ExportInput(a_in.get_input_port(), "seat_acceleration")
+        builder.ExportInput(d_in.get_input_port(), "seat_displacement")
+        accel_out, disp_out = a_in.get_output_port(), d_in.get_output_port()
+
+    state = plant.get_state_output_port()
+    # Joint torques: passive Cardan springs + PID.
+    k = passive_stiffness_vector(params, layout)
+    passive = builder.AddNamedSystem(
+        "passive_joints", PassiveJoints(layout, k, np.zeros(len(k))))
+    gains = pid_vectors(params, layout)
+    pid = builder.AddNamedSystem(
+        "joint_pid",
+        JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
+                 np.zeros(layout.num_rotational), h))
+    # Seat: inertial load of the seat motion, shear restraints.
+    inertial = builder.AddNamedSystem("seat_inertial_load", SeatInertialLoad(plant, hp.human))
+    builder.Connect(accel_out, inertial.GetInputPort("seat_acceleration"))
+    points = restraint_points(hp)
+    restraints = builder.AddNamedSystem(
+        "shear_restraints",
+        ShearRestraints(plant, points, restraint_parameters(params, points), h))
+    # Head-in-space control.
+    gain = 1.0 if params.his.enabled else 0.0
+    his = builder.AddNamedSystem(
+        "head_in_space",
+        HeadInSpace(plant, "head", "upper_torso", gain * np.array(params.his.kp),
+                    gain * np.array(params.his.kd)))
+    forces = (passive, pid, restraints, his, inertial)
+    adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
+    for i, s in enumerate(forces):
+        builder.Connect(state, s.GetInputPort("state"))
+        builder.Connect(s.GetOutputPort("generalized_force"), adder.get_input_port(i))
+    builder.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
+    sys.update(passive_joints=passive, joint_pid=pid, seat_inertial_load=inertial,
+               shear_restraints=restraints, head_in_space=his)
+
+    # Measurements.
+    channels = builder.AddNamedSystem("body_channels", BodyChannels(plant, _marker_list(hp)))
+    builder.Connect(state, channels.GetInputPort("state"))
+    builder.Connect(disp_out, channels.GetInputPort("seat_displacement"))
+    seat_forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
+    builder.Connect(plant.get_contact_results_output_port(),
+                    seat_forces.GetInputPort("contact_results"))
+    builder.Connect(restraints.GetOutputPort("seat_forces"),
+                    seat_forces.GetInputPort("restraint_forces"))
+    sys.update(body_channels=channels, seat_forces=seat_forces)
+    if guard:
+        g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(hp))
+        builder.Connect(state, g.GetInputPort("state"))
+        sys["divergence_guard"] = g
+
+    outputs = {
+        "channels": channels.GetOutputPort("channels"),
+        "seat_forces": seat_forces.GetOutputPort("seat_forces"),
+        "state": plant.get_state_output_port(),
+        "joint_torques": pid.GetOutputPort("torque"),
+        "his_torque": his.GetOutputPort("torque"),
+        "seat_acceleration": accel_out,
+        "seat_displacement": disp_out,
+    }
+    for name, port in outputs.items():
+        builder.ExportOutput(port, name)
+    loggers = {}
+    if log_period is not None:
+        for name in ("channels", "seat_forces", "joint_torques", "his_torque",
+                     "seat_acceleration", "seat_displacement"):
+            port = outputs[name]
+            log = builder.AddNamedSystem(f"log_{name}", VectorLogSink(port.size(), log_period))
+            builder.Connect(port, log.get_input_port())
+            loggers[name] = log
+    diagram = builder.Build()
+    diagram.set_name("ehm_seated_human")
+    return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal)
+
+
+__all__ = ["EhmDiagram", "build_diagram", "CHANNEL_NAMES", "SEAT_FORCE_NAMES"]

@@ -1,0 +1,393 @@
+"""Load the seated human and its seat into a MultibodyPlant.
+
+`add_seated_human(builder, params)` parses the SDF (the 50th-percentile male
+by `package://ehm_drake/...` URL, or a scaled body generated from it), adds
+the pelvis' free joint (roll-pitch-yaw floating, so all 31 DoFs are minimal
+coordinates), the joint damping, and the contact properties of the
+body-seat contact pairs, and finalizes the plant.
+
+Passive joints (paper Sec. II, "restraint cardan"): the torsional springs
+about each joint's Cardan angles and the axial spring of the spinal
+compression DoF are the vectorized `ehm_drake.systems.joints.PassiveJoints`
+system; the matching dampers are the joints' own damping, which the SAP
+solver integrates implicitly.  Both are context parameters, so
+identification changes them without rebuilding anything.  (Drake's
+`LinearBushingRollPitchYaw` is the equivalent force element, but profiling
+put it at 3.4 us per joint per step, a third of the step budget.)
+
+Contact: each body collision ellipsoid touches exactly one seat part (see
+`params.CONTACT_PAIRS`); all other body-seat pairs are filtered out.  The
+pair's stiffness and damping are exactly the parameter values: point
+contact with SAP's linear Kelvin-Voigt law f = k (x + tau xdot), tau = d/k.
+No friction: shear is carried by the point restraints of
+`ehm_drake.systems.seat.ShearRestraints`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+from pydrake.geometry import (
+    AddCompliantHydroelasticProperties,
+    AddContactMaterial,
+    AddRigidHydroelasticProperties,
+    CollisionFilterDeclaration,
+    GeometrySet,
+    ProximityProperties,
+    RoleAssign,
+    SceneGraph,
+)
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import (
+    AddMultibodyPlant,
+    CoulombFriction,
+    MultibodyPlant,
+    MultibodyPlantConfig,
+)
+from pydrake.multibody.tree import BallRpyJoint, RevoluteJoint, RpyFloatingJoint, UniversalJoint
+from pydrake.systems.framework import DiagramBuilder
+
+from ..params import CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
+from .anthropometry import REFERENCE, Body, BodyMeasures, build_body
+from .sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
+
+PACKAGE_NAME = "ehm_drake"
+#: Nominal share of body weight carried by each contact pair in the erect,
+#: high-support posture (about half under the ischia, a tenth per thigh, a
+#: few percent per foot and per pad; the static split of this model after
+#: settling is within a few percent of it).  Used only to convert a pair's
+#: linear stiffness into a hydroelastic modulus with the same tangent
+#: stiffness at that load.
+NOMINAL_LOAD_SHARE = {
+    "pelvis_pan": 0.50,
+    "thighs_pan": 0.10,
+    "lower_back_pad": 0.02,
+    "upper_back_pad": 0.02,
+    "feet_floor": 0.06,
+}
+#: Point stiffness of the seat parts.  Drake combines k = k1 k2/(k1 + k2);
+#: an infinite value (exactly rigid) makes SAP produce NaN in Drake 1.51, so
+#: the seat is very stiff and each body ellipsoid's stiffness is raised so the
+#: pair's combined stiffness is exactly its parameter value.
+SEAT_POINT_STIFFNESS = 1e10
+
+
+def model_directory() -> Path:
+    """The folder holding package.xml and the SDF files (`sdf/` in the repo).
+
+    Installed, it is the package `ehm_drake.sdf`; when the source tree's
+    `ehm_drake` shadows the installed one (running from the checkout), it is
+    the checkout's `sdf/` folder.
+    """
+    try:
+        return Path(str(resources.files("ehm_drake.sdf")))
+    except ModuleNotFoundError:
+        return Path(__file__).resolve().parents[2] / "sdf"
+
+
+def configure_parser(parser: Parser) -> Parser:
+    """Make `package://ehm_drake/...` resolvable for `parser`."""
+    pm = parser.package_map()
+    if not pm.Contains(PACKAGE_NAME):
+        pm.Add(PACKAGE_NAME, str(model_directory()))
+    return parser
+
+
+def _joint_axes(joint) -> list[int]:
+    """Cardan axes (0=x, 1=y, 2=z of the joint frame) of a joint's DoFs."""
+    if isinstance(joint, BallRpyJoint):
+        return [0, 1, 2]
+    if isinstance(joint, UniversalJoint):
+        return [0, 1]
+    if isinstance(joint, RevoluteJoint):
+        return [1]
+    raise TypeError(type(joint))
+
+
+@dataclass(frozen=True)
+class JointLayout:
+    """Where the rotational joint DoFs (and the spinal compression DoF) sit
+    in the plant's q and v, for the vectorized joint systems."""
+
+    nq: int
+    nv: int
+    rot_q: np.ndarray  # (n,) indices into q of the rotational DoFs
+    rot_v: np.ndarray  # (n,) indices into v
+    #: (m, 3) indices into the rotational-DoF vector of each BallRpyJoint's
+    #: roll, pitch, yaw (they need the Cardan rate mapping).
+    ball_triplets: np.ndarray
+    spine_q: int
+    spine_v: int
+    names: tuple[str, ...]  # "<joint>_<x|y|z>"
+    joints: tuple[str, ...]
+    groups: tuple[str, ...]  # passive group of each rotational DoF
+    axes: tuple[int, ...]  # 0/1/2 = x/y/z Cardan axis of each rotational DoF
+
+    @property
+    def num_rotational(self) -> int:
+        return len(self.rot_q)
+
+
+@dataclass
+class HumanPlant:
+    """A finalized plant with handles to what the rest of the model needs."""
+
+    plant: MultibodyPlant
+    scene_graph: SceneGraph
+    body: Body
+    human: object  # ModelInstanceIndex
+    seat: object
+    layout: JointLayout
+    #: collision geometry name -> (GeometryId, contact pair name)
+    body_geometries: dict[str, tuple[object, str]]
+    #: seat part name -> GeometryId
+    seat_geometries: dict[str, object]
+    contact_model: str
+    time_step: float
+
+    @property
+    def num_dofs(self) -> int:
+        return self.plant.num_velocities()
+
+
+def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures):
+    parser = configure_parser(Parser(plant))
+    if measures == REFERENCE:
+        (human,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{HUMAN_SDF_NAME}")
+        (seat,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{SEAT_SDF_NAME}")
+    else:
+        (human,) = parser.AddModelsFromString(human_sdf(body), "sdf")
+        (seat,) = parser.AddModelsFromString(seat_sdf(body), "sdf")
+    return human, seat
+
+
+def add_seated_human(
+    builder: DiagramBuilder,
+    params: ModelParams,
+    measures: BodyMeasures = REFERENCE,
+) -> HumanPlant:
+    """Add the plant (+ SceneGraph) of the seated human to `builder`."""
+    body = build_body(measures)
+    config = MultibodyPlantConfig(
+        time_step=params.simulation.time_step_s,
+        discrete_contact_approximation="sap",
+        contact_model="point" if params.contact.model == "point" else "hydroelastic_with_fallback",
+        # Outputs are computed from the state when asked; sampling them every
+        # step (reaction forces included) cost 15% of the step in profiling.
+        use_sampled_output_ports=False,
+    )
+    plant, scene_graph = AddMultibodyPlant(config, builder)
+    plant.set_name("plant")
+    human, seat = _load_models(plant, body, measures)
+    pelvis = plant.GetBodyByName("pelvis", human)
+    free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
+    free.set_default_translation(body.segments["pelvis"].origin_W)
+    _set_default_joint_damping(plant, human, params)
+    body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
+    plant.Finalize()
+    return HumanPlant(
+        plant=plant,
+        scene_graph=scene_graph,
+        body=body,
+        human=human,
+        seat=seat,
+        layout=_joint_layout(plant, human),
+        body_geometries=body_geoms,
+        seat_geometries=seat_geoms,
+        contact_model=params.contact.model,
+        time_step=params.simulation.time_step_s,
+    )
+
+
+def _joint_layout(plant: MultibodyPlant, human) -> JointLayout:
+    entries = []
+    for group, joints in PASSIVE_GROUPS.items():
+        for jname in joints:
+            joint = plant.GetJointByName(jname, human)
+            for i, axis in enumerate(_joint_axes(joint)):
+                entries.append((joint.velocity_start() + i, joint.position_start() + i,
+                                jname, group, axis, isinstance(joint, BallRpyJoint)))
+    entries.sort()
+    triplets = [[i, i + 1, i + 2] for i, e in enumerate(entries) if e[5] and e[4] == 0]
+    spine = plant.GetJointByName("spinal_compression", human)
+    return JointLayout(
+        nq=plant.num_positions(),
+        nv=plant.num_velocities(),
+        rot_q=np.array([e[1] for e in entries]),
+        rot_v=np.array([e[0] for e in entries]),
+        ball_triplets=np.array(triplets, dtype=int).reshape(-1, 3),
+        spine_q=spine.position_start(),
+        spine_v=spine.velocity_start(),
+        names=tuple(f"{e[2]}_{'xyz'[e[4]]}" for e in entries),
+        joints=tuple(e[2] for e in entries),
+        groups=tuple(e[3] for e in entries),
+        axes=tuple(e[4] for e in entries),
+    )
+
+
+# ---------------------------------------------------------------------------
+# Joint parameters: parameter file -> per-DoF vectors
+# ---------------------------------------------------------------------------
+
+
+def _per_dof(layout: JointLayout, group_of, attr: str) -> np.ndarray:
+    """Value of `attr` ([x, y, z] per group) for each rotational DoF."""
+    return np.array(
+        [getattr(group_of(g), attr)[axis] for g, axis in zip(layout.groups, layout.axes)]
+    )
+
+
+def passive_stiffness_vector(params: ModelParams, layout: JointLayout) -> np.ndarray:
+    """Cardan spring stiffness per rotational DoF, then the spinal axial one."""
+    k = _per_dof(layout, lambda g: getattr(params.passive, g), "stiffness")
+    return np.append(k, params.passive.spine_axial_stiffness)
+
+
+#: PID group of each passive group.
+PID_GROUP_OF = {g: pg for pg, joints in PID_GROUPS.items()
+                for g, gj in PASSIVE_GROUPS.items() if set(gj) <= set(joints)}
+
+
+def pid_vectors(params: ModelParams, layout: JointLayout) -> dict[str, np.ndarray]:
+    """Per-DoF PID gains: kp, kd, ki and the integral torque limit.
+
+    ki = (kp + passive k) / tau_I, so a joint under a constant load returns
+    to its set point with time constant tau_I (paper: "about 3 s" to reach
+    it = 3 tau_I); ki = 0 without integrator.
+    """
+    def grp(g):
+        return getattr(params.pid, PID_GROUP_OF[g])
+
+    kp = _per_dof(layout, grp, "kp")
+    kd = _per_dof(layout, grp, "kd")
+    limit = _per_dof(layout, grp, "integral_torque_limit")
+    tau_i = np.array([grp(g).integral_time_s for g in layout.groups])
+    if params.pid.integrator:
+        ki = (kp + passive_stiffness_vector(params, layout)[:-1]) / tau_i
+    else:
+        ki = np.zeros_like(kp)
+    return {"kp": kp, "ki": ki, "kd": kd, "integral_limit": limit}
+
+
+def _joint_damping(params: ModelParams, joint) -> np.ndarray:
+    for group, joints in PASSIVE_GROUPS.items():
+        if joint.name() in joints:
+            return np.asarray(getattr(params.passive, group).damping, float)[_joint_axes(joint)]
+    raise KeyError(joint.name())
+
+
+def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
+    for joints in PASSIVE_GROUPS.values():
+        for jname in joints:
+            joint = plant.GetJointByName(jname, human)
+            joint.set_default_damping_vector(_joint_damping(params, joint))
+    plant.GetJointByName("spinal_compression", human).set_default_damping_vector(
+        [params.passive.spine_axial_damping]
+    )
+
+
+def set_joint_damping(hp: HumanPlant, plant_context, params: ModelParams) -> None:
+    """Write the joint damping of `params` into `plant_context`."""
+    for joints in PASSIVE_GROUPS.values():
+        for jname in joints:
+            joint = hp.plant.GetJointByName(jname, hp.human)
+            joint.SetDampingVector(plant_context, _joint_damping(params, joint))
+    hp.plant.GetJointByName("spinal_compression", hp.human).SetDampingVector(
+        plant_context, [params.passive.spine_axial_damping]
+    )
+
+
+# ---------------------------------------------------------------------------
+# Contact
+# ---------------------------------------------------------------------------
+
+
+def _hydroelastic_modulus(k: float, semi_axes, load: float) -> float:
+    """Hydroelastic modulus giving tangent stiffness `k` at normal `load`.
+
+    For an ellipsoid (a, b, c) pressed along c into a rigid plane, Drake's
+    pressure field (linear in normalized depth) gives F = pi E a b d^2 / c^2,
+    hence dF/dd = 2 sqrt(pi E a b F) / c and E = k^2 c^2 / (4 pi a b F).
+    """
+    a, b, c = semi_axes
+    return k * k * c * c / (4.0 * math.pi * a * b * load)
+
+
+def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weight: float):
+    """ProximityProperties of a body ellipsoid of contact pair `pair`."""
+    cp = getattr(params.contact, pair)
+    props = ProximityProperties()
+    k_body = cp.stiffness * SEAT_POINT_STIFFNESS / (SEAT_POINT_STIFFNESS - cp.stiffness)
+    AddContactMaterial(
+        dissipation=None,
+        point_stiffness=k_body,
+        friction=CoulombFriction(0.0, 0.0),
+        properties=props,
+    )
+    # Relaxation times add up over the pair; the seat's is zero.
+    props.AddProperty("material", "relaxation_time", cp.damping / cp.stiffness)
+    if params.contact.model == "hydroelastic":
+        load = NOMINAL_LOAD_SHARE[pair] * body_weight
+        AddCompliantHydroelasticProperties(
+            resolution_hint=params.contact.hydroelastic_resolution_m,
+            hydroelastic_modulus=_hydroelastic_modulus(cp.stiffness, semi_axes, load),
+            properties=props,
+        )
+    return props
+
+
+def _seat_contact_properties(params: ModelParams):
+    props = ProximityProperties()
+    AddContactMaterial(
+        dissipation=0.0,
+        point_stiffness=SEAT_POINT_STIFFNESS,
+        friction=CoulombFriction(0.0, 0.0),
+        properties=props,
+    )
+    props.AddProperty("material", "relaxation_time", 0.0)
+    if params.contact.model == "hydroelastic":
+        AddRigidHydroelasticProperties(properties=props)
+    return props
+
+
+def _collision_geometries(plant, scene_graph, instance) -> dict[str, object]:
+    inspector = scene_graph.model_inspector()
+    out = {}
+    for b in plant.GetBodyIndices(instance):
+        for gid in plant.GetCollisionGeometriesForBody(plant.get_body(b)):
+            out[inspector.GetName(gid).split("::")[-1]] = gid
+    return out
+
+
+def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body):
+    inspector = scene_graph.model_inspector()
+    source = plant.get_source_id()
+    body_weight = body.total_mass * 9.81
+    geoms = _collision_geometries(plant, scene_graph, human)
+    seat_geoms = _collision_geometries(plant, scene_graph, seat)
+    body_geoms = {}
+    allowed = set()
+    for pair, (names, part) in CONTACT_PAIRS.items():
+        for name in names:
+            gid = geoms[name]
+            shape = inspector.GetShape(gid)
+            props = body_contact_properties(params, pair, (shape.a(), shape.b(), shape.c()),
+                                            body_weight)
+            scene_graph.AssignRole(source, gid, props, RoleAssign.kReplace)
+            body_geoms[name] = (gid, pair)
+            allowed.add((name, part))
+    for gid in seat_geoms.values():
+        scene_graph.AssignRole(source, gid, _seat_contact_properties(params), RoleAssign.kReplace)
+    # Only the listed pairs may touch.
+    manager = scene_graph.collision_filter_manager()
+    for name, (gid, _) in body_geoms.items():
+        for part, sid in seat_geoms.items():
+            if (name, part) not in allowed:
+                manager.Apply(
+                    CollisionFilterDeclaration().ExcludeBetween(GeometrySet(gid), GeometrySet(sid))
+                )
+    return body_geoms, seat_geoms

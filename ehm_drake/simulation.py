@@ -1,0 +1,475 @@
+"""Settle and vibrate: the paper's simulation protocol (Desai et al. Sec. III).
+
+* `static_equilibrium(model)` solves for the fixed point of the discrete
+  closed-loop dynamics (plant + PID integrators) with no excitation: the body
+  at rest, joints at their reference angles, integrators holding the static
+  joint torques.  Since the SAP contact force at rest is exactly k times the
+  penetration, this is the static equilibrium of the continuous equations too.
+* `settle(model)` starts from that equilibrium (the paper's restart
+  technique replaces the 5 s settle of every run) and simulates the settle
+  time without excitation for the requested variant: the default variant
+  stays put; without integrator the body drifts (paper Fig. 5).  The settled
+  state is saved and reused by later runs (`SettledState.save/load`).
+* `vibrate(model, settled, signal)` plays a seat signal from the settled
+  state and records the body channels, seat forces and joint torques.
+
+A blow-up (NaN, falling through the seat, lost posture, runaway energy)
+stops with `SimulationDiverged`, naming the time and the body.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from .diagram import SEAT_FORCE_NAMES, EhmDiagram, build_diagram
+from .model.anthropometry import REFERENCE, BodyMeasures
+from .params import PASSIVE_GROUPS, ModelParams
+from .signals import SeatSignal, make_seat_signal
+from .systems.outputs import CHANNEL_NAMES, SimulationDiverged
+from .systems.rotations import rpy_from_rotation
+
+
+class EquilibriumError(RuntimeError):
+    """The static equilibrium could not be found."""
+
+
+# ---------------------------------------------------------------------------
+# Discrete state of the whole diagram as one vector
+# ---------------------------------------------------------------------------
+
+
+class StateMap:
+    """The diagram's discrete state groups (plant, PID, restraints) as one
+    stacked vector, in the order Drake keeps them."""
+
+    def __init__(self, model: EhmDiagram):
+        self.model = model
+        self.systems = [s for s in model.diagram.GetSystems()
+                        if s.num_discrete_state_groups() > 0]
+        self.sizes = []
+        ctx = model.diagram.CreateDefaultContext()
+        for s in self.systems:
+            sub = s.GetMyContextFromRoot(ctx)
+            self.sizes.append(sub.get_discrete_state().get_vector(0).size())
+        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)])
+        self.size = int(self.offsets[-1])
+        names = [s.get_name() for s in self.systems]
+        self._index = dict(zip(names, range(len(names)), strict=True))
+
+    def slice(self, name: str) -> slice:
+        i = self._index[name]
+        return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
+
+    def get(self, root_context) -> np.ndarray:
+        return np.concatenate([s.GetMyContextFromRoot(root_context).get_discrete_state()
+                               .get_vector(0).CopyToVector() for s in self.systems])
+
+    def set(self, root_context, x) -> None:
+        for i, s in enumerate(self.systems):
+            sub = s.GetMyMutableContextFromRoot(root_context)
+            sub.get_mutable_discrete_state().get_mutable_vector(0).SetFromVector(
+                x[self.offsets[i]:self.offsets[i + 1]])
+
+    def step(self, root_context) -> np.ndarray:
+        """The discrete update map x+ = F(x) at the current context."""
+        values = self.model.diagram.EvalUniquePeriodicDiscreteUpdate(root_context)
+        return np.concatenate([values.get_vector(i).CopyToVector()
+                               for i in range(values.num_groups())])
+
+
+# ---------------------------------------------------------------------------
+# Settled state (restart file)
+# ---------------------------------------------------------------------------
+
+
+def model_fingerprint(params: ModelParams, measures: BodyMeasures, variant: str) -> str:
+    blob = json.dumps([params.to_dict(), [measures.mass_kg, measures.stature_m,
+                                          measures.resolved_sitting_height()], variant],
+                      sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+@dataclass
+class SettledState:
+    """The state at the end of settling, and what it says about posture."""
+
+    state: np.ndarray  # stacked discrete state (see StateMap)
+    fingerprint: str
+    variant: str
+    summary: dict = field(default_factory=dict)
+
+    def save(self, path: str | Path) -> None:
+        np.savez(path, state=self.state, fingerprint=self.fingerprint, variant=self.variant,
+                 summary=json.dumps(self.summary))
+
+    @classmethod
+    def load(cls, path: str | Path) -> SettledState:
+        with np.load(path, allow_pickle=False) as f:
+            return cls(f["state"], str(f["fingerprint"]), str(f["variant"]),
+                       json.loads(str(f["summary"])))
+
+
+def _fixed_inputs(model: EhmDiagram, context) -> None:
+    d = model.diagram
+    for name in ("seat_acceleration", "seat_displacement"):
+        if d.HasInputPort(name):
+            d.GetInputPort(name).FixValue(context, np.zeros(3))
+
+
+def static_equilibrium(model: EhmDiagram, tol: float = 1e-9, max_iterations: int = 30,
+                       seat_in: bool = True):
+    """Fixed point of the discrete closed-loop dynamics without excitation.
+
+    Unknowns: the plant positions q and the PID integrals z (v = 0); the
+    equations: v+ = 0 (no motion after a step) and q - q_ref = 0 on the
+    integrating joints (the integrators are at rest).  Newton iterations with
+    a finite-difference Jacobian of the discrete step.
+
+    With `seat_in`, the vertical shear of the backrest pads is relaxed as the
+    body sinks into the seat (the anchors slip, as the back slides down the
+    backrest when one sits down); the pan and floor restraints keep what
+    balance needs.  Returns (root_context, StateMap).
+    """
+    if model.signal is not None:
+        raise ValueError("static_equilibrium needs a diagram built without a signal")
+    smap = StateMap(model)
+    ctx = model.diagram.CreateDefaultContext()
+    _fixed_inputs(model, ctx)
+    x = smap.get(ctx)
+    plant = model.plant
+    nq, nv = plant.num_positions(), plant.num_velocities()
+    ps = smap.slice("plant")
+    pid = model.systems["joint_pid"]
+    zs = smap.slice("joint_pid")
+    integrating = model.params.pid.integrator
+    layout = model.hp.layout
+    h = model.params.simulation.time_step_s
+    unknown = np.r_[np.arange(ps.start, ps.start + nq),
+                    np.arange(zs.start, zs.stop) if integrating else np.array([], int)]
+    # Scale the residual: velocities in m/s and rad/s, joint errors in rad.
+    gains = pid.GetMyContextFromRoot(ctx).get_numeric_parameter(pid.parameter_index)
+    reference = gains.CopyToVector()[4 * layout.num_rotational:]
+
+    def residual(xv):
+        smap.set(ctx, xv)
+        xn = smap.step(ctx)
+        r = [xn[ps][nq:] / h]
+        if integrating:
+            r.append(xv[ps][layout.rot_q] - reference)
+        return np.concatenate(r)
+
+    restraints = model.systems["shear_restraints"]
+    ss = smap.slice("shear_restraints")
+    pad_z = np.array([2 * i + 1 for i, p in enumerate(restraints.points) if "pad" in p.part])
+
+    for _outer in range(6 if seat_in else 1):
+        for _ in range(max_iterations):
+            r = residual(x)
+            if np.max(np.abs(r)) < tol:
+                break
+            J = np.empty((len(r), len(unknown)))
+            for j, k in enumerate(unknown):
+                eps = 1e-7 * max(1.0, abs(x[k]))
+                xp = x.copy()
+                xp[k] += eps
+                J[:, j] = (residual(xp) - r) / eps
+            dx = np.linalg.lstsq(J, -r, rcond=None)[0]
+            # Damped step: never move a coordinate by more than 1 cm / 0.05 rad.
+            scale = min(1.0, 0.01 / max(np.max(np.abs(dx[:nq])), 1e-12))
+            x[unknown] += scale * dx
+        else:
+            raise EquilibriumError(
+                f"static equilibrium not found in {max_iterations} Newton iterations "
+                f"(residual {np.max(np.abs(residual(x))):.3g})")
+        if not seat_in or len(pad_z) == 0:
+            break
+        # Seating-in: anchor the pads' vertical restraints where the back is.
+        smap.set(ctx, x)
+        pos = restraints.GetMyContextFromRoot(ctx)
+        kin = restraints._kin.Eval(pos)  # deflection along the axes before slip
+        new = kin[1][pad_z]
+        if np.max(np.abs(x[ss][pad_z] - new)) < 1e-6:
+            break
+        x[ss.start + pad_z] = new
+    smap.set(ctx, x)
+    return ctx, smap
+
+
+# ---------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class SimulationResult:
+    """Time series of one run, SI units (rotations in rad)."""
+
+    times: np.ndarray
+    seat_acceleration: np.ndarray  # (N, 3)
+    seat_displacement: np.ndarray  # (N, 3)
+    channels: np.ndarray  # (N, 30), CHANNEL_NAMES; m and rad
+    seat_forces: np.ndarray  # (N, 12), SEAT_FORCE_NAMES; N
+    joint_torques: np.ndarray  # (N, 24); N m
+    his_torque: np.ndarray  # (N, 3); N m
+    joint_names: tuple[str, ...]
+    meta: dict = field(default_factory=dict)
+
+    channel_names = CHANNEL_NAMES
+    seat_force_names = SEAT_FORCE_NAMES
+
+    def channel(self, segment: str, dof: str) -> np.ndarray:
+        return self.channels[:, CHANNEL_NAMES.index(f"{segment}_{dof}")]
+
+    def after(self, t0: float) -> SimulationResult:
+        """The part of the run from time t0 on."""
+        k = self.times >= t0 - 1e-9
+        return SimulationResult(self.times[k], self.seat_acceleration[k],
+                                self.seat_displacement[k], self.channels[k],
+                                self.seat_forces[k], self.joint_torques[k],
+                                self.his_torque[k], self.joint_names, dict(self.meta))
+
+    @property
+    def sample_rate(self) -> float:
+        return 1.0 / float(np.median(np.diff(self.times)))
+
+    def timeseries_columns(self) -> tuple[list[str], np.ndarray]:
+        """Columns of the lab format: t, seat_a*, <segment>_<dof> (m, deg)."""
+        rot = np.array([name.split("_")[-1] in ("roll", "pitch", "yaw")
+                        for name in CHANNEL_NAMES])
+        ch = self.channels.copy()
+        ch[:, rot] = np.degrees(ch[:, rot])
+        names = ["t", "seat_ax", "seat_ay", "seat_az", *CHANNEL_NAMES]
+        return names, np.column_stack([self.times, self.seat_acceleration, ch])
+
+    def write_csv(self, directory: str | Path) -> list[Path]:
+        """timeseries.csv (lab format), seat_forces.csv, joint_torques.csv."""
+        directory = Path(directory)
+        names, data = self.timeseries_columns()
+        paths = [directory / "timeseries.csv", directory / "seat_forces.csv",
+                 directory / "joint_torques.csv"]
+        _write_csv(paths[0], names, data)
+        _write_csv(paths[1], ["t", *SEAT_FORCE_NAMES],
+                   np.column_stack([self.times, self.seat_forces]))
+        _write_csv(paths[2], ["t", *[f"torque_{n}" for n in self.joint_names],
+                              "his_tx", "his_ty", "his_tz"],
+                   np.column_stack([self.times, self.joint_torques, self.his_torque]))
+        return paths
+
+
+def _write_csv(path: Path, names, data) -> None:
+    with open(path, "w") as f:
+        f.write(",".join(names) + "\n")
+        np.savetxt(f, data, delimiter=",", fmt="%.9g")
+
+
+# ---------------------------------------------------------------------------
+# Running
+# ---------------------------------------------------------------------------
+
+
+class Progress:
+    """A one-line progress display on stderr (when `enabled`)."""
+
+    def __init__(self, label: str, total: float, enabled: bool = True):
+        self.label, self.total, self.enabled = label, total, enabled
+        self.t0 = time.perf_counter()
+        self._last = 0.0
+
+    def update(self, done: float, extra: str = "") -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if now - self._last < 0.5 and done < self.total:
+            return
+        self._last = now
+        frac = min(done / self.total, 1.0) if self.total > 0 else 1.0
+        wall = now - self.t0
+        eta = wall * (1 - frac) / frac if frac > 0 else float("nan")
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * frac:5.1f}% "
+                         f"eta {eta:5.0f} s {extra}   ")
+        if frac >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _advance(simulator: Simulator, t_end: float, progress: Progress | None,
+             chunk: float = 0.25) -> None:
+    """Advance in chunks, updating the progress display between chunks (a
+    Ctrl-C lands between or inside chunks and propagates to the caller)."""
+    t0 = t = simulator.get_context().get_time()
+    while t < t_end - 1e-12:
+        t = min(t + chunk, t_end)
+        simulator.AdvanceTo(t)
+        if progress is not None:
+            progress.update(t - t0)
+
+
+def _simulator(model: EhmDiagram, root_context) -> Simulator:
+    simulator = Simulator(model.diagram, root_context)
+    simulator.Initialize()
+    return simulator
+
+
+def posture_summary(model: EhmDiagram, root_context) -> dict:
+    """Posture: joint errors against the reference per group (deg), head
+    orientation in space (deg), trunk (T8) forward displacement from the
+    reference posture (m), seat normal forces (N)."""
+    plant = model.plant
+    pctx = model.plant_context(root_context)
+    q = plant.GetPositions(pctx)
+    layout = model.hp.layout
+    err = np.degrees(q[layout.rot_q])
+    groups = {}
+    for g in PASSIVE_GROUPS:
+        sel = [i for i, gg in enumerate(layout.groups) if gg == g]
+        groups[g] = float(np.max(np.abs(err[sel])))
+    head = plant.GetBodyByName("head", model.hp.human)
+    R = plant.EvalBodyPoseInWorld(pctx, head).rotation().matrix()
+    head_rpy = np.degrees(rpy_from_rotation(R))
+    trunk = plant.GetFrameByName("trunk_marker", model.hp.human)
+    p_T8 = trunk.CalcPoseInWorld(pctx).translation()
+    forces = model.diagram.GetOutputPort("seat_forces").Eval(root_context).reshape(-1, 3)
+    parts = dict(zip(("pan", "floor", "lower_pad", "upper_pad"), forces, strict=True))
+    t8_ref = model.hp.body.markers["trunk"][1]
+    return {
+        "settle_posture_error_deg": groups,
+        "max_joint_error_deg": float(np.max(np.abs(err))),
+        "head_pitch_deg": float(head_rpy[1]),
+        "head_orientation_rpy_deg": head_rpy.tolist(),
+        "trunk_T8_forward_drift_m": float(p_T8[0] - t8_ref[0]),
+        "backrest_force_n": {
+            "lower_pad": float(parts["lower_pad"][0]),
+            "upper_pad": float(parts["upper_pad"][0]),
+            "total": float(parts["lower_pad"][0] + parts["upper_pad"][0]),
+        },
+        "pan_force_n": float(parts["pan"][2]),
+        "floor_force_n": float(parts["floor"][2]),
+        "back_in_contact": bool(parts["lower_pad"][0] > 1.0 and parts["upper_pad"][0] > 1.0),
+    }
+
+
+def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
+           variant: str = "default", settle_time: float | None = None,
+           progress: bool = False) -> SettledState:
+    """Settle the body on the seat for `variant` (see module doc)."""
+    eq_model = build_diagram(params, measures, None, "default", guard=False)
+    ctx, smap = static_equilibrium(eq_model)
+    x_eq = smap.get(ctx)
+    T = params.simulation.settle_time_s if settle_time is None else settle_time
+    model = build_diagram(params, measures, None, variant)
+    vctx = model.diagram.CreateDefaultContext()
+    _fixed_inputs(model, vctx)
+    vmap = StateMap(model)
+    x0 = x_eq.copy()
+    if variant != "default":
+        # Same equilibrium pose; without integrator there is no integral torque.
+        x0[vmap.slice("joint_pid")] = 0.0
+    vmap.set(vctx, x0)
+    start = posture_summary(model, vctx)
+    simulator = _simulator(model, vctx)
+    prog = Progress(f"settle ({variant})", T, progress) if progress else None
+    _advance(simulator, T, prog)
+    summary = posture_summary(model, vctx)
+    summary["head_pitch_drift_deg"] = summary["head_pitch_deg"] - start["head_pitch_deg"]
+    summary["settle_time_s"] = T
+    return SettledState(vmap.get(vctx), model_fingerprint(params, measures, variant), variant,
+                        summary)
+
+
+def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
+            measures: BodyMeasures = REFERENCE, variant: str | None = None,
+            progress: bool = False) -> SimulationResult:
+    """Play `signal` from the settled state; record at the output rate.
+
+    The signal's settle time is skipped: the run starts from the settled
+    state at t = signal.settle_time.
+    """
+    variant = variant or settled.variant
+    if settled.fingerprint != model_fingerprint(params, measures, variant):
+        raise ValueError("the settled state was computed for other parameters, body or "
+                         "variant; settle again")
+    period = 1.0 / params.simulation.output_rate_hz
+    model = build_diagram(params, measures, signal, variant, log_period=period)
+    ctx = model.diagram.CreateDefaultContext()
+    smap = StateMap(model)
+    smap.set(ctx, settled.state)
+    ctx.SetTime(signal.settle_time)
+    # Outputs are relative to the settled pose.
+    channels = model.systems["body_channels"]
+    cctx = channels.GetMyMutableContextFromRoot(ctx)
+    x_plant = model.plant.GetPositionsAndVelocities(model.plant_context(ctx))
+    cctx.get_mutable_numeric_parameter(channels.settled_pose_parameter_index).SetFromVector(
+        channels.settled_pose_vector(x_plant))
+    simulator = _simulator(model, ctx)
+    prog = (Progress(f"vibrate ({variant})", signal.duration - signal.settle_time)
+            if progress else None)
+    wall0 = time.perf_counter()
+    interrupted = False
+    try:
+        _advance(simulator, signal.duration, prog)
+    except KeyboardInterrupt:
+        interrupted = True
+    wall = time.perf_counter() - wall0
+    logs = {k: v.FindLog(ctx) for k, v in model.loggers.items()}
+    t = logs["channels"].sample_times()
+    result = SimulationResult(
+        times=t,
+        seat_acceleration=logs["seat_acceleration"].data().T,
+        seat_displacement=logs["seat_displacement"].data().T,
+        channels=logs["channels"].data().T,
+        seat_forces=logs["seat_forces"].data().T,
+        joint_torques=logs["joint_torques"].data().T,
+        his_torque=logs["his_torque"].data().T,
+        joint_names=model.joint_names,
+        meta={
+            "variant": variant,
+            "signal": signal.meta,
+            "simulated_s": float(t[-1] - t[0]) if len(t) else 0.0,
+            "wall_s": wall,
+            "real_time_factor": float((ctx.get_time() - signal.settle_time) / wall)
+            if wall > 0 else math.inf,
+            "interrupted": interrupted,
+        },
+    )
+    if interrupted:
+        raise SimulationInterrupted(result)
+    return result
+
+
+class SimulationInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a run; `.result` holds what was recorded so far."""
+
+    def __init__(self, result: SimulationResult):
+        super().__init__("simulation interrupted")
+        self.result = result
+
+
+def simulate(params: ModelParams, measures: BodyMeasures = REFERENCE, variant: str = "default",
+             signal: SeatSignal | None = None, direction: str = "z", rms: float = 0.1941,
+             duration: float = 60.0, seed: int = 0, settled: SettledState | None = None,
+             progress: bool = False):
+    """Settle (or reuse `settled`) and vibrate.  Returns (SettledState,
+    SimulationResult)."""
+    if settled is None:
+        settled = settle(params, measures, variant, progress=progress)
+    if signal is None:
+        s = params.simulation
+        signal = make_seat_signal("random", direction, rms, duration, seed, s.time_step_s,
+                                  s.settle_time_s, s.onset_time_s)
+    return settled, vibrate(params, settled, signal, measures, variant, progress=progress)
+
+
+__all__ = [
+    "EquilibriumError", "SettledState", "SimulationDiverged", "SimulationInterrupted",
+    "SimulationResult", "StateMap", "settle", "simulate", "static_equilibrium", "vibrate",
+]

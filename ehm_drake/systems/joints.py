@@ -1,0 +1,217 @@
+"""Joint-space LeafSystems: passive Cardan restraints and the PID controller.
+
+Both act on the 24 rotational joint DoFs of the model (see
+`ehm_drake.model.plant.JointLayout`).
+
+Passive joints are MADYMO-style Cardan restraints (Desai et al., Sec. II):
+torsional springs on the joint's roll-pitch-yaw (Cardan) angles.  For a
+`BallRpyJoint` the generalized velocity is the angular velocity w_FM_F, not
+the angle rates, so a Cardan torque tau maps to the generalized force
+f = N(q)^T tau, where N(q) maps w_FM_F to the angle rates; this keeps the
+springs conservative at any angle.  Their dampers are the plant's joint
+damping (implicit in SAP).
+
+The PID acts on the generalized coordinates: the joint angles q (error
+against the reference posture) and the joint velocities v, and returns
+generalized forces (torques about the joint's parent-frame axes).  At the
+reference posture (all angles zero) this is the Cardan PID exactly; for the
+few degrees of a vibration study the difference is second order.
+
+Both are `TemplateSystem`s (float, AutoDiffXd).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from ..model.plant import JointLayout
+from . import SCALARS
+
+
+def rpy_rate_matrices(rpy):
+    """N(q) for space-fixed x-y-z angles: rpy_dot = N @ w_FM_F.
+
+    `rpy` has shape (n, 3); returns (n, 3, 3).  (Reference form of the
+    mapping; `cardan_to_generalized` uses it expanded.)
+    """
+    p, y = rpy[:, 1], rpy[:, 2]
+    cp, cy, sy = np.cos(p), np.cos(y), np.sin(y)
+    tp = np.sin(p) / cp
+    zero, one = 0.0 * p, 0.0 * p + 1.0
+    return np.stack(
+        [
+            np.stack([cy / cp, sy / cp, zero], axis=-1),
+            np.stack([-sy, cy, zero], axis=-1),
+            np.stack([cy * tp, sy * tp, one], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+class _BallIndex:
+    """Precomputed index arrays of the ball joints' roll, pitch, yaw."""
+
+    def __init__(self, layout: JointLayout):
+        b = layout.ball_triplets
+        self.roll, self.pitch, self.yaw = b[:, 0].copy(), b[:, 1].copy(), b[:, 2].copy()
+
+
+def cardan_to_generalized(ball: _BallIndex, q_rot, tau):
+    """f = N(q)^T tau on the ball joints (identity on the other DoFs)."""
+    p = q_rot[ball.pitch]
+    y = q_rot[ball.yaw]
+    cp, cy, sy = np.cos(p), np.cos(y), np.sin(y)
+    tr, tp_, ty = tau[ball.roll], tau[ball.pitch], tau[ball.yaw]
+    f = tau.copy()
+    u = tr / cp + ty * np.tan(p)  # common factor of the roll and yaw terms
+    f[ball.roll] = cy * u - sy * tp_
+    f[ball.pitch] = sy * u + cy * tp_
+    return f
+
+
+@TemplateSystem.define("PassiveJoints_", T_list=SCALARS)
+def PassiveJoints_(T):
+    class Impl(LeafSystem_[T]):
+        """Cardan torsional springs on the rotational joints and the axial
+        spring of the spinal compression DoF.
+
+        Input ``state`` (plant [q; v]); output ``generalized_force``.
+        Numeric parameter ``stiffness_and_neutral``: per rotational DoF the
+        stiffness (N m/rad), then the axial stiffness (N/m); then the
+        spring-free positions in the same layout (rad, m).
+        """
+
+        def _construct(self, layout: JointLayout, stiffness, neutral, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._layout = layout
+            self._ball = _BallIndex(layout)
+            n = layout.num_rotational + 1
+            stiffness = np.asarray(stiffness, float)
+            neutral = np.asarray(neutral, float)
+            assert stiffness.shape == (n,) and neutral.shape == (n,)
+            self._init = np.concatenate([stiffness, neutral])
+            self._q_index = np.append(layout.rot_q, layout.spine_q)
+            self._v_index = np.append(layout.rot_v, layout.spine_v)
+            self._state_port = self.DeclareVectorInputPort("state", layout.nq + layout.nv)
+            self._param = self.DeclareNumericParameter(BasicVector_[T](self._init))
+            self.DeclareVectorOutputPort("generalized_force", layout.nv, self._calc)
+
+        def _construct_copy(self, other, converter=None):
+            n = len(other._init) // 2
+            Impl._construct(self, other._layout, other._init[:n], other._init[n:],
+                            converter=converter)
+
+        @property
+        def parameter_index(self):
+            return self._param
+
+        def _calc(self, context, output):
+            x = self._state_port.Eval(context)
+            kq0 = context.get_numeric_parameter(self._param).CopyToVector()
+            n = len(self._q_index)
+            q = x[self._q_index]
+            tau = -kq0[:n] * (q - kq0[n:])
+            f = np.zeros(self._layout.nv, dtype=tau.dtype)
+            f[self._v_index] = cardan_to_generalized(self._ball, q, tau)
+            output.SetFromVector(f)
+
+    return Impl
+
+
+PassiveJoints = PassiveJoints_[None]
+
+PID_PARAMETERS = ("kp", "ki", "kd", "integral_limit", "reference")
+
+
+@TemplateSystem.define("JointPid_", T_list=SCALARS)
+def JointPid_(T):
+    class Impl(LeafSystem_[T]):
+        """Vectorized PID on every rotational joint DoF (Desai et al.).
+
+        tau = -(Kp e + Ki z + Kd v), e = q - q_ref, where q_ref are the
+        relative joint angles of the initial posture.  The integral z is a
+        discrete state updated every `period` s by forward Euler; anti-windup
+        keeps |Ki z| within the integral torque limit by stopping the
+        integration there.
+
+        Input ``state``; outputs ``generalized_force`` (nv) and ``torque``
+        (one per rotational DoF, N m, for logging).  Numeric parameter
+        ``gains``: kp, ki, kd, integral_limit, reference, each one value per
+        rotational DoF, concatenated in that order (`PID_PARAMETERS`).
+        """
+
+        def _construct(self, layout: JointLayout, kp, ki, kd, integral_limit, reference,
+                       period: float, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._layout = layout
+            n = layout.num_rotational
+            parts = [np.asarray(a, float) for a in (kp, ki, kd, integral_limit, reference)]
+            for a in parts:
+                assert a.shape == (n,)
+            self._init = np.concatenate(parts)
+            self._period = float(period)
+            self._state_port = self.DeclareVectorInputPort("state", layout.nq + layout.nv)
+            self._param = self.DeclareNumericParameter(BasicVector_[T](self._init))
+            # The integral bound |z| <= limit/ki, derived once from the gains.
+            self._bound = self.DeclareCacheEntry(
+                "integral bound",
+                ValueProducer(allocate=lambda: AbstractValue.Make(None), calc=self._calc_bound),
+                prerequisites_of_calc={self.all_parameters_ticket()},
+            )
+            self._z_index = self.DeclareDiscreteState(n)
+            self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
+            self._torque_port = self.DeclareVectorOutputPort("torque", n, self._calc_torque)
+            self.DeclareVectorOutputPort("generalized_force", layout.nv, self._calc_force)
+
+        def _construct_copy(self, other, converter=None):
+            n = other._layout.num_rotational
+            parts = [other._init[i * n:(i + 1) * n] for i in range(5)]
+            Impl._construct(self, other._layout, *parts, other._period, converter=converter)
+
+        @property
+        def parameter_index(self):
+            return self._param
+
+        @property
+        def integral_state_index(self):
+            return self._z_index
+
+        def _calc_torque(self, context, output):
+            L = self._layout
+            n = L.num_rotational
+            x = self._state_port.Eval(context)
+            g = context.get_numeric_parameter(self._param).CopyToVector()
+            z = context.get_discrete_state(self._z_index).CopyToVector()
+            e = x[L.rot_q] - g[4 * n:]
+            output.SetFromVector(-(g[:n] * e + g[n:2 * n] * z + g[2 * n:3 * n] * x[L.nq + L.rot_v]))
+
+        def _calc_force(self, context, output):
+            tau = self._torque_port.Eval(context)
+            f = np.zeros(self._layout.nv, dtype=tau.dtype)
+            f[self._layout.rot_v] = tau
+            output.SetFromVector(f)
+
+        def _calc_bound(self, context, value):
+            n = self._layout.num_rotational
+            g = context.get_numeric_parameter(self._param).CopyToVector()
+            ki, limit = g[n:2 * n], g[3 * n:4 * n]
+            # |ki z| <= limit; a joint without integral action keeps z = 0.
+            bound = limit / np.where(ki > 0, ki, np.inf)
+            value.set_value((bound, -bound, g[4 * n:]))
+
+        def _update(self, context, discrete_state):
+            L = self._layout
+            x = self._state_port.Eval(context)
+            bound, neg_bound, reference = self._bound.Eval(context)
+            z = context.get_discrete_state(self._z_index).CopyToVector()
+            z = z + self._period * (x[L.rot_q] - reference)
+            discrete_state.get_mutable_vector(self._z_index).SetFromVector(
+                np.minimum(np.maximum(z, neg_bound), bound))
+
+    return Impl
+
+
+JointPid = JointPid_[None]

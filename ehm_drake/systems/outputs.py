@@ -1,0 +1,212 @@
+"""Measurement-side LeafSystems: body channels, seat forces, blow-up guard.
+
+Body channels are what a motion-capture lab reports: for pelvis, trunk (T8),
+head and knees, translation (m) and rotation (rad; roll, pitch, yaw about
+the seat's x, y, z) relative to the settled pose, on axes aligned with the
+seat.  Translations are absolute: the body's motion relative to the seat
+plus the seat's own displacement, so a body moving rigidly with the seat has
+transmissibility 1.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.plant import ContactResults
+from pydrake.multibody.tree import JointIndex
+from pydrake.systems.framework import BasicVector_, EventStatus, LeafSystem, LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from . import SCALARS, PlantScratch
+from .rotations import rotation_from_rpy, rpy_from_rotation
+from .seat import SEAT_PART_NAMES
+
+SEGMENTS = ("pelvis", "trunk", "head", "knee_l", "knee_r")
+DOFS = ("x", "y", "z", "roll", "pitch", "yaw")
+CHANNEL_NAMES = tuple(f"{s}_{d}" for s in SEGMENTS for d in DOFS)
+
+
+@TemplateSystem.define("BodyChannels_", T_list=SCALARS)
+def BodyChannels_(T):
+    class Impl(LeafSystem_[T]):
+        """Inputs ``state`` (plant [q; v]) and ``seat_displacement``;
+        output ``channels`` (30 = 5 segments x [x, y, z, roll, pitch, yaw];
+        m and rad).  Numeric parameter ``settled_pose``: per segment the
+        settled marker position (3) and orientation roll-pitch-yaw (3) in S.
+        """
+
+        def _construct(self, plant, markers, settled_pose=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            # markers: list of (body name, p_BM) in SEGMENTS order.
+            self._markers = [(b, np.asarray(p, float)) for b, p in markers]
+            n = len(self._markers)
+            settled = (np.zeros(6 * n) if settled_pose is None
+                       else np.asarray(settled_pose, float))
+            self._args = (plant, self._markers, settled)
+            self._scratch = PlantScratch(plant, T)
+            sp = self._scratch.plant
+            self._bodies = [sp.GetBodyByName(b) for b, _ in self._markers]
+            self._state = self.DeclareVectorInputPort(
+                "state", sp.num_positions() + sp.num_velocities())
+            self._disp = self.DeclareVectorInputPort("seat_displacement", 3)
+            self._settled = self.DeclareNumericParameter(BasicVector_[T](settled))
+            self.DeclareVectorOutputPort("channels", 6 * n, self._calc)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, *other._args, converter=converter)
+
+        @property
+        def settled_pose_parameter_index(self):
+            return self._settled
+
+        def marker_poses(self, x):
+            """[(p_SM, R_SM)] of the markers for plant state x."""
+            ctx = self._scratch.set_state(x)
+            out = []
+            for body, (_, p_BM) in zip(self._bodies, self._markers, strict=True):
+                X = self._scratch.plant.EvalBodyPoseInWorld(ctx, body).GetAsMatrix34()
+                out.append((X[:, 3] + X[:, :3] @ p_BM, X[:, :3]))
+            return out
+
+        def settled_pose_vector(self, x) -> np.ndarray:
+            """The ``settled_pose`` parameter value for plant state x."""
+            return np.concatenate([np.concatenate([p, rpy_from_rotation(R)])
+                                   for p, R in self.marker_poses(x)])
+
+        def _calc(self, context, output):
+            x = self._state.Eval(context)
+            d = self._disp.Eval(context)
+            ref = context.get_numeric_parameter(self._settled).CopyToVector().reshape(-1, 6)
+            y = []
+            for i, (p, R) in enumerate(self.marker_poses(x)):
+                rel = rpy_from_rotation(R @ rotation_from_rpy(ref[i, 3:]).T)
+                y.append(np.concatenate([p - ref[i, :3] + d, rel]))
+            output.SetFromVector(np.concatenate(y))
+
+    return Impl
+
+
+BodyChannels = BodyChannels_[None]
+
+
+class SeatForces(LeafSystem):
+    """Force each seat part exerts on the body, in S (N): contact normal
+    force plus the shear restraint force.
+
+    Inputs ``contact_results`` (the plant's) and ``restraint_forces`` (from
+    ShearRestraints); output ``seat_forces`` = [pan, floor, lower_pad,
+    upper_pad] x [x, y, z].
+    """
+
+    def __init__(self, plant, seat_geometries: dict):
+        super().__init__()
+        self._part_of_geometry = {gid: SEAT_PART_NAMES.index(name)
+                                  for name, gid in seat_geometries.items()}
+        self._contacts = self.DeclareAbstractInputPort(
+            "contact_results", AbstractValue.Make(ContactResults()))
+        self._restraints = self.DeclareVectorInputPort("restraint_forces", 3 * len(SEAT_PART_NAMES))
+        self.DeclareVectorOutputPort("seat_forces", 3 * len(SEAT_PART_NAMES), self._calc)
+
+    def _calc(self, context, output):
+        out = self._restraints.Eval(context).reshape(-1, 3).copy()
+        results = self._contacts.Eval(context)
+        for i in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(i)
+            pair = info.point_pair()
+            f_B = info.contact_force()  # on body B, applied at the contact point
+            if pair.id_A in self._part_of_geometry:  # seat is A: force on the body is f_B
+                out[self._part_of_geometry[pair.id_A]] += f_B
+            elif pair.id_B in self._part_of_geometry:  # seat is B: body gets -f_B
+                out[self._part_of_geometry[pair.id_B]] -= f_B
+        for i in range(results.num_hydroelastic_contacts()):
+            info = results.hydroelastic_contact_info(i)
+            surface = info.contact_surface()
+            F = info.F_Ac_W().translational()  # on the body of geometry M
+            if surface.id_M() in self._part_of_geometry:
+                out[self._part_of_geometry[surface.id_M()]] -= F
+            elif surface.id_N() in self._part_of_geometry:
+                out[self._part_of_geometry[surface.id_N()]] += F
+        output.SetFromVector(out.reshape(-1))
+
+
+class SimulationDiverged(RuntimeError):
+    """The simulation blew up: `time`, `body` and `reason` say when, where, why."""
+
+    def __init__(self, time: float, body: str, reason: str):
+        self.time, self.body, self.reason = time, body, reason
+        super().__init__(f"simulation diverged at t = {time:.3f} s in body '{body}': {reason}")
+
+
+class DivergenceGuard(LeafSystem):
+    """Checks the plant state at a fixed rate and raises SimulationDiverged
+    on NaN/inf, a body falling through the seat, a joint leaving its
+    physiological range, or kinetic energy far beyond vibration levels."""
+
+    #: Thresholds (reasons): 0.2 m/s^2-class vibration gives < 1 J of
+    #: kinetic energy; 50 J is a 75 kg body at 1.2 m/s.  Joint angles past
+    #: 60 deg from the reference posture are outside seated postures.
+    MAX_KINETIC_ENERGY_J = 50.0
+    MAX_JOINT_ANGLE_RAD = math.radians(60.0)
+    MIN_PELVIS_HEIGHT_M = -0.05
+
+    def __init__(self, hp, period: float = 0.01):
+        super().__init__()
+        self._hp = hp
+        self._plant_context = hp.plant.CreateDefaultContext()
+        plant = hp.plant
+        self._state = self.DeclareVectorInputPort(
+            "state", plant.num_positions() + plant.num_velocities())
+        self.DeclarePeriodicPublishEvent(period, 0.0, self._check)
+        self._q_owner = {}
+        self._v_owner = {}
+        for j in range(plant.num_joints()):
+            joint = plant.get_joint(JointIndex(j))
+            for k in range(joint.num_positions()):
+                self._q_owner[joint.position_start() + k] = joint.child_body().name()
+            for k in range(joint.num_velocities()):
+                self._v_owner[joint.velocity_start() + k] = joint.child_body().name()
+        pelvis_joint = plant.GetJointByName("pelvis_free")
+        self._pelvis_z = pelvis_joint.position_start() + 5
+        self._layout = hp.layout
+        self._reference = np.zeros(hp.layout.num_rotational)
+
+    def set_reference(self, q_rot):
+        self._reference = np.asarray(q_rot, float).copy()
+
+    def _check(self, context):
+        x = self._state.Eval(context)
+        t = context.get_time()
+        nq = self._hp.plant.num_positions()
+        bad = np.flatnonzero(~np.isfinite(x))
+        if len(bad):
+            i = int(bad[0])
+            owner = self._q_owner.get(i) if i < nq else self._v_owner.get(i - nq)
+            raise SimulationDiverged(t, owner or "?", "state became NaN/inf")
+        if x[self._pelvis_z] < self.MIN_PELVIS_HEIGHT_M:
+            raise SimulationDiverged(
+                t, "pelvis", f"fell through the seat pan (height {x[self._pelvis_z]:.3f} m)")
+        L = self._layout
+        dev = np.abs(x[L.rot_q] - self._reference)
+        if np.max(dev) > self.MAX_JOINT_ANGLE_RAD:
+            i = int(np.argmax(dev))
+            raise SimulationDiverged(
+                t, self._q_owner[int(L.rot_q[i])],
+                f"joint {L.names[i]} moved {math.degrees(dev[i]):.0f} deg from its reference "
+                "(posture lost)")
+        plant, ctx = self._hp.plant, self._plant_context
+        plant.SetPositionsAndVelocities(ctx, x)
+        ke = plant.CalcKineticEnergy(ctx)
+        if ke > self.MAX_KINETIC_ENERGY_J:
+            worst, worst_e = "?", -1.0
+            for bi in plant.GetBodyIndices(self._hp.human):
+                body = plant.get_body(bi)
+                V = plant.EvalBodySpatialVelocityInWorld(ctx, body)
+                e = 0.5 * body.default_mass() * float(V.translational() @ V.translational())
+                if e > worst_e:
+                    worst, worst_e = body.name(), e
+            raise SimulationDiverged(
+                t, worst, f"kinetic energy {ke:.0f} J is far beyond vibration levels "
+                "(energy growing without bound)")
+        return EventStatus.Succeeded()
