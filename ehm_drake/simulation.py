@@ -49,41 +49,42 @@ class EquilibriumError(RuntimeError):
 
 class StateMap:
     """The diagram's discrete state groups (plant, PID, restraints) as one
-    stacked vector, in the order Drake keeps them."""
+    stacked vector, in the order of the diagram's own discrete values."""
 
     def __init__(self, model: EhmDiagram):
         self.model = model
-        self.systems = [s for s in model.diagram.GetSystems()
-                        if s.num_discrete_state_groups() > 0]
-        self.sizes = []
+        systems = [s for s in model.diagram.GetSystems() if s.num_discrete_state_groups() > 0]
+        # Find the diagram's group order by tagging each subsystem's state.
         ctx = model.diagram.CreateDefaultContext()
-        for s in self.systems:
-            sub = s.GetMyContextFromRoot(ctx)
-            self.sizes.append(sub.get_discrete_state().get_vector(0).size())
-        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)])
+        for i, s in enumerate(systems):
+            sub = s.GetMyMutableContextFromRoot(ctx).get_mutable_discrete_state()
+            sub.get_mutable_vector(0).SetFromVector(np.full(sub.get_vector(0).size(), i + 0.5))
+        root = ctx.get_discrete_state()
+        order = [int(root.get_vector(g).GetAtIndex(0)) for g in range(root.num_groups())]
+        self.systems = [systems[i] for i in order]
+        self.sizes = [root.get_vector(g).size() for g in range(root.num_groups())]
+        self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]).astype(int)
         self.size = int(self.offsets[-1])
-        names = [s.get_name() for s in self.systems]
-        self._index = dict(zip(names, range(len(names)), strict=True))
+        self._index = {s.get_name(): g for g, s in enumerate(self.systems)}
 
     def slice(self, name: str) -> slice:
-        i = self._index[name]
-        return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
+        g = self._index[name]
+        return slice(int(self.offsets[g]), int(self.offsets[g + 1]))
 
     def get(self, root_context) -> np.ndarray:
-        return np.concatenate([s.GetMyContextFromRoot(root_context).get_discrete_state()
-                               .get_vector(0).CopyToVector() for s in self.systems])
+        ds = root_context.get_discrete_state()
+        return np.concatenate([ds.get_vector(g).CopyToVector() for g in range(ds.num_groups())])
 
     def set(self, root_context, x) -> None:
-        for i, s in enumerate(self.systems):
-            sub = s.GetMyMutableContextFromRoot(root_context)
-            sub.get_mutable_discrete_state().get_mutable_vector(0).SetFromVector(
-                x[self.offsets[i]:self.offsets[i + 1]])
+        ds = root_context.get_mutable_discrete_state()
+        for g in range(ds.num_groups()):
+            ds.get_mutable_vector(g).SetFromVector(x[self.offsets[g]:self.offsets[g + 1]])
 
     def step(self, root_context) -> np.ndarray:
         """The discrete update map x+ = F(x) at the current context."""
         values = self.model.diagram.EvalUniquePeriodicDiscreteUpdate(root_context)
-        return np.concatenate([values.get_vector(i).CopyToVector()
-                               for i in range(values.num_groups())])
+        return np.concatenate([values.get_vector(g).CopyToVector()
+                               for g in range(values.num_groups())])
 
 
 # ---------------------------------------------------------------------------
@@ -171,11 +172,11 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-9, max_iterations: int
     ss = smap.slice("shear_restraints")
     pad_z = np.array([2 * i + 1 for i, p in enumerate(restraints.points) if "pad" in p.part])
 
-    for _outer in range(6 if seat_in else 1):
+    def solve(x):
         for _ in range(max_iterations):
             r = residual(x)
             if np.max(np.abs(r)) < tol:
-                break
+                return x
             J = np.empty((len(r), len(unknown)))
             for j, k in enumerate(unknown):
                 eps = 1e-7 * max(1.0, abs(x[k]))
@@ -183,23 +184,26 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-9, max_iterations: int
                 xp[k] += eps
                 J[:, j] = (residual(xp) - r) / eps
             dx = np.linalg.lstsq(J, -r, rcond=None)[0]
-            # Damped step: never move a coordinate by more than 1 cm / 0.05 rad.
-            scale = min(1.0, 0.01 / max(np.max(np.abs(dx[:nq])), 1e-12))
-            x[unknown] += scale * dx
-        else:
-            raise EquilibriumError(
-                f"static equilibrium not found in {max_iterations} Newton iterations "
-                f"(residual {np.max(np.abs(residual(x))):.3g})")
-        if not seat_in or len(pad_z) == 0:
-            break
-        # Seating-in: anchor the pads' vertical restraints where the back is.
-        smap.set(ctx, x)
-        pos = restraints.GetMyContextFromRoot(ctx)
-        kin = restraints._kin.Eval(pos)  # deflection along the axes before slip
-        new = kin[1][pad_z]
-        if np.max(np.abs(x[ss][pad_z] - new)) < 1e-6:
-            break
-        x[ss.start + pad_z] = new
+            # Damped step: never move a coordinate by more than 1 cm / 0.01 rad.
+            x[unknown] += min(1.0, 0.01 / max(np.max(np.abs(dx[:nq])), 1e-12)) * dx
+        raise EquilibriumError(
+            f"static equilibrium not found in {max_iterations} Newton iterations "
+            f"(residual {np.max(np.abs(residual(x))):.3g})")
+
+    x = solve(x)
+    if seat_in and len(pad_z):
+        # Seating-in: anchor the pads' vertical restraints where the back is,
+        # re-solve, until the anchors stop moving (a contraction: the pads'
+        # shear stiffness is a fraction of the seat's vertical stiffness).
+        rctx = restraints.GetMyContextFromRoot(ctx)
+        for _ in range(30):
+            smap.set(ctx, x)
+            new = restraints.axis_deflection(rctx)[pad_z]
+            change = np.max(np.abs(x[ss][pad_z] - new))
+            x[ss.start + pad_z] = new
+            x = solve(x)
+            if change < 1e-8:
+                break
     smap.set(ctx, x)
     return ctx, smap
 

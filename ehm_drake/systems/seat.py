@@ -122,8 +122,7 @@ def ShearRestraints_(T):
             # The same projection for points stacked body by body, and the
             # anchor term: A p_all - A p_SA.
             perm = (3 * self._order[:, None] + np.arange(3)).reshape(-1)
-            self._A_grouped = np.zeros_like(A)
-            self._A_grouped[:, perm] = A
+            self._A_grouped = A[:, perm]
             self._a0 = A @ self._p_SA.reshape(-1)
             self._part_of = np.array([SEAT_PART_NAMES.index(pt.part) for pt in points])
             # Sum of point forces per seat part: (12, 3n).
@@ -172,6 +171,11 @@ def ShearRestraints_(T):
         @property
         def parameter_index(self):
             return self._param
+
+        def axis_deflection(self, context) -> np.ndarray:
+            """Displacement of each point from its anchor along each axis
+            (2n, m), before slip."""
+            return self._kin.Eval(context)[1]
 
         def _calc_kinematics(self, context, value):
             """Stacked point Jacobian J (3n x nv), and the deflection and

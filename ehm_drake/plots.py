@@ -1,0 +1,129 @@
+"""Figures: seated posture (paper Fig. 5), time responses, gains.
+
+Matplotlib with the non-interactive Agg backend; every function writes a
+PNG and returns its path.  Plots show degrees where the API uses radians.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Polygon, Rectangle  # noqa: E402
+
+#: Joint chains drawn as the skeleton (child body names, proximal to distal).
+_CHAINS = (
+    ("pelvis", "lower_torso", "middle_torso", "upper_torso", "neck", "head"),
+    ("pelvis", "thigh_l", "lower_leg_l", "foot_l"),
+)
+
+
+def _skeleton_points(plant, context, human):
+    """Sagittal (x, z) points of the joint centres along the chains."""
+    chains = []
+    for chain in _CHAINS:
+        pts = []
+        for name in chain:
+            body = plant.GetBodyByName(name, human)
+            pts.append(plant.EvalBodyPoseInWorld(context, body).translation())
+        # Extend to the distal landmark: vertex for the head, toe for the foot.
+        last = plant.GetBodyByName(chain[-1], human)
+        X = plant.EvalBodyPoseInWorld(context, last)
+        tip = np.array([0.02, 0.0, 0.17]) if chain[-1] == "head" else np.array([0.21, 0, -0.045])
+        pts.append(X.multiply(tip))
+        chains.append(np.array(pts)[:, [0, 2]])
+    return chains
+
+
+def _ellipse_outlines(plant, scene_graph, context, human, n=48):
+    """Sagittal outlines (x, z) of the body's collision ellipsoids."""
+    inspector = scene_graph.model_inspector()
+    out = []
+    for bi in plant.GetBodyIndices(human):
+        body = plant.get_body(bi)
+        X_WB = plant.EvalBodyPoseInWorld(context, body)
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            shape = inspector.GetShape(gid)
+            if not hasattr(shape, "a"):
+                continue
+            a, c = shape.a(), shape.c()
+            X_BG = inspector.GetPoseInFrame(gid)
+            t = np.linspace(0, 2 * np.pi, n)
+            local = np.stack([a * np.cos(t), np.zeros(n), c * np.sin(t)], axis=1)
+            world = np.array([X_WB.multiply(X_BG.multiply(p)) for p in local])
+            out.append(world[:, [0, 2]])
+    return out
+
+
+def plot_posture(model, states: dict, path: str | Path, title: str = "Seated posture") -> Path:
+    """Side view of the body on the seat for each labelled plant state.
+
+    `states` maps a label to a plant state vector [q; v] (or q); the first
+    is drawn with its contact ellipsoids, the others as skeletons.
+    """
+    plant = model.plant
+    ctx = plant.CreateDefaultContext()
+    fig, ax = plt.subplots(figsize=(6.4, 6.4))
+    for name, (c, size) in model.hp.body.seat.boxes.items():
+        ax.add_patch(Rectangle((c[0] - size[0] / 2, c[2] - size[2] / 2), size[0], size[2],
+                               color="#1f5f99" if "pad" in name else "#555555", alpha=0.8,
+                               zorder=1))
+    styles = ["-", "--", ":", "-."]
+    colors = ["#c0392b", "#2c3e50", "#27ae60", "#8e44ad"]
+    for i, (label, x) in enumerate(states.items()):
+        x = np.asarray(x)
+        plant.SetPositions(ctx, x[: plant.num_positions()])
+        if i == 0:
+            for outline in _ellipse_outlines(plant, model.hp.scene_graph, ctx, model.hp.human):
+                ax.add_patch(Polygon(outline, closed=True, facecolor="#e8c4a8", alpha=0.5,
+                                     edgecolor="#b08060", zorder=2))
+        for j, pts in enumerate(_skeleton_points(plant, ctx, model.hp.human)):
+            ax.plot(pts[:, 0], pts[:, 1], styles[i % 4], color=colors[i % 4], lw=2, marker="o",
+                    ms=3, zorder=3, label=label if j == 0 else None)
+    ax.set_aspect("equal")
+    ax.set_xlim(-0.15, 0.95)
+    ax.set_ylim(model.hp.body.landmarks["floor"][2] - 0.08, 1.0)
+    ax.set_xlabel("x fore-aft (m)")
+    ax.set_ylabel("z vertical (m)")
+    ax.set_title(title)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_responses(result, path: str | Path, segments=("pelvis", "trunk", "head"),
+                   max_seconds: float = 20.0) -> Path:
+    """Seat acceleration and segment motions versus time."""
+    t = result.times
+    k = t <= t[0] + max_seconds
+    fig, axes = plt.subplots(1 + 2 * len(segments), 1, figsize=(8, 2 + 1.6 * 2 * len(segments)),
+                             sharex=True)
+    axes[0].plot(t[k], result.seat_acceleration[k])
+    axes[0].set_ylabel("seat acc.\n(m/s²)")
+    axes[0].legend(["x", "y", "z"], fontsize=7, ncol=3, loc="upper right")
+    row = 1
+    for seg in segments:
+        tr = np.column_stack([result.channel(seg, d) for d in "xyz"]) * 1000.0
+        rot = np.degrees(np.column_stack([result.channel(seg, d)
+                                          for d in ("roll", "pitch", "yaw")]))
+        axes[row].plot(t[k], tr[k])
+        axes[row].set_ylabel(f"{seg}\nx,y,z (mm)")
+        axes[row + 1].plot(t[k], rot[k])
+        axes[row + 1].set_ylabel(f"{seg}\nr,p,y (deg)")
+        row += 2
+    axes[-1].set_xlabel("time (s)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

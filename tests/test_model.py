@@ -1,0 +1,147 @@
+"""The body, the seat and the plant: DoFs, segments, mass, SDF, scaling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.math import RollPitchYaw
+from pydrake.systems.framework import DiagramBuilder
+
+from ehm_drake.model.anthropometry import (
+    DE_LEVA_1996_MALE,
+    REFERENCE,
+    BodyMeasures,
+    build_body,
+)
+from ehm_drake.model.plant import add_seated_human, model_directory
+from ehm_drake.model.sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
+from ehm_drake.systems.joints import cardan_to_generalized, rpy_rate_matrices
+
+SEGMENTS = {"pelvis", "lower_torso", "middle_torso", "upper_torso", "neck", "head",
+            "thigh_l", "thigh_r", "lower_leg_l", "lower_leg_r", "foot_l", "foot_r"}
+
+
+@pytest.fixture(scope="module")
+def hp(params):
+    return add_seated_human(DiagramBuilder(), params)
+
+
+def test_plant_has_31_dofs_12_segments_and_paper_mass(hp):
+    plant = hp.plant
+    assert plant.num_velocities() == 31
+    assert plant.num_positions() == 31  # roll-pitch-yaw joints: minimal coordinates
+    bodies = {plant.get_body(b).name() for b in plant.GetBodyIndices(hp.human)}
+    assert SEGMENTS <= bodies
+    # The only other body is the near-massless carrier of the spinal DoF.
+    assert bodies - SEGMENTS == {"spine_slider"}
+    mass = sum(plant.get_body(b).default_mass() for b in plant.GetBodyIndices(hp.human))
+    assert mass == pytest.approx(75.3, abs=0.5)
+
+
+def test_joints_are_the_papers(hp):
+    plant = hp.plant
+    dofs = {}
+    for j in plant.GetJointIndices(hp.human):
+        joint = plant.get_joint(j)
+        dofs[joint.name()] = (joint.type_name(), joint.num_velocities())
+    free = plant.GetJointByName("pelvis_free")
+    assert (free.type_name(), free.num_velocities()) == ("rpy_floating", 6)
+    expected = {
+        "lumbosacral_L5S1": ("ball_rpy", 3), "lumbar_L4L5": ("ball_rpy", 3),
+        "spinal_compression": ("prismatic", 1), "thoracolumbar_T12L1": ("ball_rpy", 3),
+        "lower_neck_C7T1": ("universal", 2), "upper_neck_C0C1": ("ball_rpy", 3),
+        "hip_l": ("ball_rpy", 3), "hip_r": ("ball_rpy", 3), "knee_l": ("revolute", 1),
+        "knee_r": ("revolute", 1), "ankle_l": ("revolute", 1), "ankle_r": ("revolute", 1),
+    }
+    for name, kind in expected.items():
+        assert dofs[name] == kind, name
+    assert sum(n for _, n in expected.values()) + 6 == 31
+
+
+def test_segment_masses_follow_de_leva():
+    body = build_body()
+    M = REFERENCE.mass_kg
+    frac = {k: v[1] / 100 for k, v in DE_LEVA_1996_MALE.items()}
+    s = body.segments
+    assert s["thigh_l"].mass == pytest.approx(frac["thigh"] * M)
+    assert s["lower_leg_r"].mass == pytest.approx(frac["shank"] * M)
+    assert s["middle_torso"].mass == pytest.approx(frac["mpt"] * M)
+    assert s["pelvis"].mass + s["lower_torso"].mass == pytest.approx(frac["lpt"] * M)
+    assert s["neck"].mass + s["head"].mass == pytest.approx(frac["head"] * M)
+    arms = 2 * (frac["upper_arm"] + frac["forearm"] + frac["hand"])
+    assert s["upper_torso"].mass == pytest.approx((frac["upt"] + arms) * M)
+    for seg in s.values():  # physically valid inertia: PD and triangle inequality
+        ev = np.linalg.eigvalsh(seg.inertia_W)
+        assert ev.min() > 0 and ev[0] + ev[1] >= ev[2] * (1 - 1e-9), seg.name
+
+
+def test_sitting_height_is_the_papers():
+    body = build_body()
+    assert body.landmarks["vertex"][2] == pytest.approx(0.92, abs=0.005)
+
+
+def test_marker_frames_exist(hp):
+    for seg in ("pelvis", "trunk", "head", "knee_l", "knee_r"):
+        hp.plant.GetFrameByName(f"{seg}_marker", hp.human)
+    t8 = hp.plant.GetFrameByName("trunk_marker", hp.human)
+    assert t8.body().name() == "upper_torso"
+
+
+def test_sdf_on_disk_is_generated_from_the_anthropometry():
+    body = build_body()
+    d = model_directory()
+    assert (d / HUMAN_SDF_NAME).read_text() == human_sdf(body)
+    assert (d / SEAT_SDF_NAME).read_text() == seat_sdf(body)
+    assert (d / "package.xml").is_file()
+
+
+@pytest.mark.parametrize("mass,stature", [(60.0, 1.62), (100.0, 1.90)])
+def test_scaled_body(params, mass, stature):
+    hp = add_seated_human(DiagramBuilder(), params, BodyMeasures(mass, stature))
+    plant = hp.plant
+    total = sum(plant.get_body(b).default_mass() for b in plant.GetBodyIndices(hp.human))
+    assert total == pytest.approx(mass, abs=1e-3)  # + the 0.1 g spine slider
+    body = hp.body
+    sh = body.measures.resolved_sitting_height()
+    assert body.landmarks["vertex"][2] == pytest.approx(0.92 * sh / 0.92, rel=0.01)
+    # Seat adjusted to the occupant: pads at the scaled landmarks.
+    assert body.seat.boxes["upper_pad"][0][2] == pytest.approx(
+        body.landmarks["scapula_angle_skin"][2])
+
+
+@pytest.mark.parametrize("measures,match", [
+    (BodyMeasures(75.3, 176.0), "centimetres"),
+    (BodyMeasures(0.075, 1.76), "outside"),
+    (BodyMeasures(float("nan"), 1.76), "finite"),
+    (BodyMeasures(75.3, 1.76, 1.2), "sitting_height"),
+])
+def test_bad_anthropometry_is_rejected(measures, match):
+    with pytest.raises(ValueError, match=match):
+        build_body(measures)
+
+
+def test_cardan_rate_matrix_matches_drake():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        rpy = rng.uniform(-0.6, 0.6, 3)
+        w = rng.standard_normal(3)
+        expected = RollPitchYaw(rpy).CalcRpyDtFromAngularVelocityInParent(w)
+        N = rpy_rate_matrices(rpy[None, :])[0]
+        np.testing.assert_allclose(N @ w, expected, atol=1e-12)
+
+
+def test_cardan_torque_mapping_conserves_power(hp):
+    """f = N^T tau: the power of the generalized force on w equals the power
+    of the gimbal torque on the angle rates."""
+    from ehm_drake.systems.joints import _BallIndex
+
+    layout = hp.layout
+    rng = np.random.default_rng(1)
+    q = rng.uniform(-0.5, 0.5, layout.num_rotational)
+    v = rng.standard_normal(layout.num_rotational)
+    tau = rng.standard_normal(layout.num_rotational)
+    f = cardan_to_generalized(_BallIndex(layout), q, tau)
+    b = layout.ball_triplets
+    qdot = v.copy()
+    qdot[b] = np.einsum("nij,nj->ni", rpy_rate_matrices(q[b]), v[b])
+    assert f @ v == pytest.approx(tau @ qdot, rel=1e-12)

@@ -1,0 +1,236 @@
+"""Settling, the paper's variants (Fig. 5), the seat excitation, the body
+feeling it exactly, determinism, symmetry, blow-up detection."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.systems.analysis import Simulator
+
+from ehm_drake.diagram import build_diagram
+from ehm_drake.params import params_from_dict
+from ehm_drake.signals import PAPER_RMS, SeatSignal, SignalError, make_seat_signal
+from ehm_drake.simulation import (
+    SettledState,
+    SimulationDiverged,
+    StateMap,
+    settle,
+    static_equilibrium,
+    vibrate,
+)
+
+
+def test_static_equilibrium_is_a_fixed_point(params):
+    model = build_diagram(params, guard=False)
+    ctx, smap = static_equilibrium(model)
+    x = smap.get(ctx)
+    x_next = smap.step(ctx)
+    nq = model.plant.num_positions()
+    # At rest after a step: velocities stay ~0 and nothing moves.
+    assert np.max(np.abs(x_next[nq:2 * nq])) < 1e-8
+    assert np.max(np.abs(x_next - x)) < 1e-8
+    layout = model.hp.layout
+    assert np.max(np.abs(x[layout.rot_q])) < 1e-8  # joints exactly at reference
+
+
+def test_default_holds_the_initial_posture(settled_default):
+    s = settled_default.summary
+    for group, err in s["settle_posture_error_deg"].items():
+        assert err < 0.5, group
+    assert abs(s["head_pitch_drift_deg"]) < 0.5
+    assert s["back_in_contact"]
+    assert s["backrest_force_n"]["lower_pad"] > 5 and s["backrest_force_n"]["upper_pad"] > 5
+
+
+def test_no_integrator_drifts_forward_like_paper_fig5(settled_variants):
+    s = settled_variants["no-integrator"].summary
+    # Paper: head pitch rotation of 6.4 deg and the trunk moved forward,
+    # losing the backrest.
+    assert 3.0 < s["head_pitch_drift_deg"] < 12.0
+    assert s["trunk_T8_forward_drift_m"] > 0.01
+    assert s["backrest_force_n"]["upper_pad"] < 1.0
+    assert not s["back_in_contact"]
+
+
+def test_high_stiffness_holds_the_posture(settled_variants):
+    s = settled_variants["high-stiffness"].summary
+    assert abs(s["head_pitch_drift_deg"]) < 1.5
+    assert max(s["settle_posture_error_deg"].values()) < 1.0
+    assert s["back_in_contact"]
+
+
+@pytest.mark.parametrize("kind", ["random", "multisine", "sweep", "sine"])
+@pytest.mark.parametrize("direction", ["x", "y", "z", "xyz"])
+def test_seat_signal_rms(kind, direction):
+    sig = make_seat_signal(kind, direction, PAPER_RMS, duration=30.0, seed=4)
+    rms = sig.rms()
+    for i, ax in enumerate("xyz"):
+        if ax in direction:
+            assert rms[i] == pytest.approx(PAPER_RMS, rel=0.01)
+        else:
+            assert rms[i] == 0.0
+    # Quiet while settling, smooth onset (starts from zero).
+    k0 = int(round(sig.settle_time / sig.time_step))
+    assert np.all(sig.acceleration[:k0 + 1] == 0.0)
+    assert np.max(np.abs(sig.acceleration[k0:k0 + 10])) < 0.01 * PAPER_RMS
+
+
+def test_random_signal_is_band_limited():
+    sig = make_seat_signal("random", "z", 1.0, duration=100.0, seed=1)
+    a = sig.acceleration[int(sig.steady_start / sig.time_step):, 2]
+    spec = np.abs(np.fft.rfft(a)) ** 2
+    f = np.fft.rfftfreq(len(a), sig.time_step)
+    out_of_band = spec[(f > 13.0) | (f < 0.05)].sum() / spec.sum()
+    assert out_of_band < 1e-3
+
+
+def test_signals_are_deterministic():
+    a = make_seat_signal("random", "xyz", 0.3, 20.0, seed=7).acceleration
+    b = make_seat_signal("random", "xyz", 0.3, 20.0, seed=7).acceleration
+    c = make_seat_signal("random", "xyz", 0.3, 20.0, seed=8).acceleration
+    assert a.tobytes() == b.tobytes()
+    assert not np.array_equal(a, c)
+
+
+@pytest.mark.parametrize("kwargs,match", [
+    (dict(direction="w"), "direction"),
+    (dict(rms=-1.0), "RMS"),
+    (dict(rms=194.1), "mm/s"),
+    (dict(kind="noise"), "kind"),
+    (dict(duration=0.5), "onset"),
+])
+def test_bad_signal_requests(kwargs, match):
+    with pytest.raises(SignalError, match=match):
+        make_seat_signal(**{"kind": "random", "direction": "z", **kwargs})
+
+
+def test_body_feels_the_seat_motion_exactly(params):
+    """A rigid body away from the seat falls freely in the inertial frame,
+    whatever the seat does: its absolute motion is exactly the discrete free
+    fall, so the inertial load equals the seat acceleration to round-off."""
+    p = params_from_dict({"restraints": {k: {"stiffness": 0.0, "damping": 0.0}
+                                         for k in ("pelvis_pan", "thighs_pan", "lower_back_pad",
+                                                   "upper_back_pad", "feet_floor")}})
+    sig = make_seat_signal("random", "xyz", 2.0, duration=3.0, seed=3, settle_time=0.0,
+                           onset_time=0.2)
+    model = build_diagram(p, signal=sig, guard=False, log_period=0.001)
+    ctx = model.diagram.CreateDefaultContext()
+    plant, pctx = model.plant, model.plant_context(ctx)
+    q = plant.GetPositions(pctx)
+    free = plant.GetJointByName("pelvis_free")
+    q[free.position_start() + 5] += 20.0  # far above the seat: no contact
+    plant.SetPositions(pctx, q)
+    for j in plant.GetJointIndices(model.hp.human):
+        joint = plant.get_joint(j)
+        if joint.num_velocities() and joint.name() != "pelvis_free":
+            joint.Lock(pctx)
+    ch = model.systems["body_channels"]
+    ch.GetMyMutableContextFromRoot(ctx).get_mutable_numeric_parameter(
+        ch.settled_pose_parameter_index).SetFromVector(
+        ch.settled_pose_vector(plant.GetPositionsAndVelocities(pctx)))
+    sim = Simulator(model.diagram, ctx)
+    sim.AdvanceTo(1.5)  # falls 11 m: still clear of the seat
+    log = model.loggers["channels"].FindLog(ctx)
+    t, y = log.sample_times(), log.data().T
+    k = np.round(t / 1e-3).astype(int)
+    h, g = 1e-3, -9.81
+    freefall = h * h * g * k * (k + 1) / 2
+    for seg in range(5):
+        np.testing.assert_allclose(y[:, 6 * seg + 0], 0.0, atol=1e-9)
+        np.testing.assert_allclose(y[:, 6 * seg + 1], 0.0, atol=1e-9)
+        np.testing.assert_allclose(y[:, 6 * seg + 2], freefall, atol=1e-9)
+        np.testing.assert_allclose(y[:, 6 * seg + 3:6 * seg + 6], 0.0, atol=1e-9)
+    # ... while the seat itself moved by centimetres.
+    d = model.loggers["seat_displacement"].FindLog(ctx).data()
+    assert np.max(np.abs(d)) > 0.01
+
+
+def _run(params, settled, direction, seed, duration=4.0, rms=0.5):
+    s = params.simulation
+    sig = make_seat_signal("random", direction, rms, duration, seed, s.time_step_s,
+                           s.settle_time_s, s.onset_time_s)
+    return vibrate(params, settled, sig)
+
+
+def test_same_seed_same_bytes(params, settled_default):
+    a = _run(params, settled_default, "xyz", 11, duration=2.0)
+    b = _run(params, settled_default, "xyz", 11, duration=2.0)
+    assert a.channels.tobytes() == b.channels.tobytes()
+    assert a.seat_forces.tobytes() == b.seat_forces.tobytes()
+
+
+def _mirrored_pair(params, settled, direction, seed):
+    """Responses to a seat signal and to its negative."""
+    s = params.simulation
+    sig = make_seat_signal("random", direction, 0.5, 3.0, seed, s.time_step_s,
+                           s.settle_time_s, s.onset_time_s)
+    neg = SeatSignal(sig.time_step, sig.settle_time, sig.onset_time, -sig.acceleration)
+    return vibrate(params, settled, sig), vibrate(params, settled, neg)
+
+
+SAGITTAL = [6 * s + i for s in range(3) for i in (0, 2, 4)]  # pelvis/trunk/head x, z, pitch
+LATERAL = [6 * s + i for s in range(3) for i in (1, 3, 5)]  # y, roll, yaw
+
+
+def test_lateral_excitation_of_the_symmetric_body(params, settled_default):
+    """Mirror symmetry: the sagittal response to a lateral seat motion is even
+    in the input (no linear fore-aft/vertical response; what remains is the
+    second-order geometry of rolling, at twice the frequency), and the
+    lateral response is odd."""
+    a, b = _mirrored_pair(params, settled_default, "y", 5)
+    ra, rb = a.channels - a.channels[0], b.channels - b.channels[0]
+    lateral = np.std(ra[:, LATERAL])
+    assert lateral > 1e-3
+    odd_sagittal = np.max(np.abs(ra[:, SAGITTAL] - rb[:, SAGITTAL])) / 2
+    even_lateral = np.max(np.abs(ra[:, LATERAL] + rb[:, LATERAL])) / 2
+    assert odd_sagittal < 1e-6 * lateral
+    # The lateral response's even part is the (physical) second-order term.
+    assert even_lateral < 1e-2 * lateral
+
+
+def test_vertical_excitation_has_no_lateral_response(params, settled_default):
+    r = _run(params, settled_default, "z", 6)
+    rel = r.channels - r.channels[0]
+    sagittal = np.std(rel[:, SAGITTAL])
+    assert sagittal > 1e-4
+    # Lateral channels stay at solver noise (1e-6 of the sagittal response).
+    assert np.std(rel[:, LATERAL]) < 1e-5 * sagittal
+    # The knees stay mirror images of each other.
+    np.testing.assert_allclose(rel[:, 6 * 3 + 1], -rel[:, 6 * 4 + 1], atol=1e-5 * sagittal)
+
+
+def test_settled_state_round_trip(tmp_path, settled_default):
+    path = tmp_path / "settled.npz"
+    settled_default.save(path)
+    back = SettledState.load(path)
+    assert back.fingerprint == settled_default.fingerprint
+    assert np.array_equal(back.state, settled_default.state)
+
+
+def test_settled_state_of_another_model_is_refused(params, settled_default):
+    other = params_from_dict({"his": {"kp": [1.0, 1.0, 1.0]}})
+    sig = make_seat_signal("random", "z", 0.2, 2.0, 0)
+    with pytest.raises(ValueError, match="other parameters"):
+        vibrate(other, settled_default, sig)
+
+
+def test_unstable_parameters_are_reported_with_time_and_body(params):
+    # An explicit derivative gain far beyond the head's inertia (c h / I >> 2)
+    # makes the neck's discrete dynamics unstable as soon as it moves.
+    bad = params_from_dict({"pid": {"neck": {"kd": [60.0, 60.0, 60.0]}}})
+    settled = settle(bad, settle_time=0.2)  # at rest, the equilibrium exists
+    sig = make_seat_signal("random", "xyz", 0.5, 2.0, 1, settle_time=0.2, onset_time=0.2)
+    with pytest.raises(SimulationDiverged) as info:
+        vibrate(bad, settled, sig)
+    err = info.value
+    assert 0.2 <= err.time < 2.2
+    assert err.body in ("neck", "head", "upper_torso")
+    assert err.body in str(err) and "kinetic energy" in str(err)
+
+
+def test_state_map_covers_all_discrete_states(params):
+    model = build_diagram(params, guard=False)
+    smap = StateMap(model)
+    nx = 2 * model.plant.num_positions() + model.hp.layout.num_rotational
+    nx += 2 * len(model.systems["shear_restraints"].points)
+    assert smap.size == nx
