@@ -101,6 +101,8 @@ def _check_fs(fs: float) -> float:
 
 
 def _as_signal(x: Any, name: str = "x") -> np.ndarray:
+    if np.iscomplexobj(x):
+        raise TypeError(f"{name} must be real, got complex values")
     try:
         arr = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError):
@@ -154,8 +156,11 @@ def weighting_response(name: str, f: Any) -> np.ndarray:
 def _slowest_time_constant(key: str) -> float:
     """Largest ``1 / |Re(pole)|`` of the weighting (s)."""
     f1, q1, f2, q2, _f3, f4, q4, _f5, _q5, f6, q6 = WEIGHTING_PARAMETERS[key]
-    taus = [2 * q / (2 * np.pi * fc) for fc, q in ((f1, q1), (f2, q2), (f4, q4), (f6, q6))
-            if math.isfinite(fc)]
+    taus = [
+        2 * q / (2 * np.pi * fc)
+        for fc, q in ((f1, q1), (f2, q2), (f4, q4), (f6, q6))
+        if math.isfinite(fc)
+    ]
     return max(taus)
 
 

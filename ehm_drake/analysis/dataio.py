@@ -342,8 +342,13 @@ class FrfData:
             arr = getattr(self, name)
             bad = np.flatnonzero(~np.isin(arr, allowed))
             if bad.size:
-                fail(bad, name, lambda i, a=arr, al=allowed: f"unknown value '{a[i]}', "
-                     f"expected one of {list(al)}")
+                fail(
+                    bad,
+                    name,
+                    lambda i, a=arr, al=allowed: (
+                        f"unknown value '{a[i]}', expected one of {list(al)}"
+                    ),
+                )
         for name in ("freq_hz", "gain", "phase_deg", "coherence"):
             arr = getattr(self, name)
             bad = np.flatnonzero(~np.isfinite(arr))
@@ -360,12 +365,14 @@ class FrfData:
             fail(bad, "gain", lambda i: f"gain must be >= 0, got {self.gain[i]}")
         bad = np.flatnonzero((self.coherence < 0) | (self.coherence > 1))
         if bad.size:
-            fail(bad, "coherence", lambda i: f"coherence must be in [0, 1], got "
-                 f"{self.coherence[i]}")
+            fail(
+                bad, "coherence", lambda i: f"coherence must be in [0, 1], got {self.coherence[i]}"
+            )
         bad = np.flatnonzero(self.level_rms <= 0)
         if bad.size:
-            fail(bad, "level_rms", lambda i: f"level_rms must be > 0 m/s^2, got "
-                 f"{self.level_rms[i]}")
+            fail(
+                bad, "level_rms", lambda i: f"level_rms must be > 0 m/s^2, got {self.level_rms[i]}"
+            )
         # duplicated (channel, frequency) rows are ambiguous
         seen: dict[tuple, int] = {}
         for i in range(n):
@@ -502,9 +509,7 @@ class FrfData:
         idx = np.asarray(
             sorted(idx, key=lambda i: (order[self._key(int(i))], self.freq_hz[i])), dtype=int
         )
-        return FrfData(
-            **{c: getattr(self, c)[idx] for c in FRF_COLUMNS + FRF_OPTIONAL_COLUMNS}
-        )
+        return FrfData(**{c: getattr(self, c)[idx] for c in FRF_COLUMNS + FRF_OPTIONAL_COLUMNS})
 
     def get(
         self,
@@ -624,6 +629,28 @@ def read_frf(path: str | Path) -> FrfData:
 # ------------------------------------------------------------------------------------------
 
 
+def _check_timeseries_columns(
+    names: Sequence[str], source: str | None = None, line: int | None = None
+) -> None:
+    """``t``, all seat columns, only ``<segment>_<dof>`` otherwise, no duplicates."""
+    where = _where(source, line)
+    dup = sorted({h for h in names if list(names).count(h) > 1})
+    if dup:
+        raise DataFormatError(f"{where}duplicate column(s) {dup}")
+    if "t" not in names:
+        raise DataFormatError(f"{where}missing time column 't'")
+    missing = [c for c in SEAT_COLUMNS if c not in names]
+    if missing:
+        raise DataFormatError(f"{where}missing seat acceleration column(s) {missing}")
+    for h in names:
+        if h == "t" or h in SEAT_COLUMNS:
+            continue
+        try:
+            parse_channel_name(h)
+        except DataFormatError as exc:
+            raise DataFormatError(f"{_where(source, line, h)}unknown column: {exc}") from None
+
+
 @dataclass(eq=False)
 class TimeSeriesData:
     """Seat acceleration and body motion time histories.
@@ -662,8 +689,9 @@ class TimeSeriesData:
         except (TypeError, ValueError) as exc:
             raise DataFormatError(f"{_where(src)}t / seat_acc must be numeric: {exc}") from None
         if t.ndim != 1 or t.size < 2:
-            raise DataFormatError(f"{_where(src)}'t' must be 1-D with >= 2 samples, got shape "
-                                  f"{t.shape}")
+            raise DataFormatError(
+                f"{_where(src)}'t' must be 1-D with >= 2 samples, got shape {t.shape}"
+            )
         n = t.size
         if acc.shape != (n, 3):
             raise DataFormatError(
@@ -726,6 +754,48 @@ class TimeSeriesData:
                 f"{SAMPLING_RTOL:g} (relative)"
             )
         self.meta = _validate_meta(self.meta or {}, _where(src))
+
+    @classmethod
+    def from_columns(
+        cls,
+        names: Sequence[str],
+        data: Any,
+        meta: Mapping[str, Any] | None = None,
+    ) -> TimeSeriesData:
+        """Build from column names (``timeseries.csv`` header) and a 2-D data array.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Column names: ``t``, ``seat_ax``, ``seat_ay``, ``seat_az`` and any
+            ``<segment>_<dof>`` channels, in any order.
+        data : array_like, shape (N, len(names))
+            Values in file units (s, m/s^2, m, deg).
+        meta : mapping, optional
+            Metadata such as ``{"level_rms": 0.3, "direction": "z"}``.
+
+        Raises
+        ------
+        DataFormatError
+            Missing/unknown/duplicate columns, a shape mismatch, or any constructor check.
+        """
+        names = [str(n) for n in names]
+        _check_timeseries_columns(names)
+        try:
+            arr = np.asarray(data, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise DataFormatError("data must be a numeric 2-D array") from None
+        if arr.ndim != 2 or arr.shape[1] != len(names):
+            raise DataFormatError(
+                f"data must have shape (N, {len(names)}) to match the column names, got {arr.shape}"
+            )
+        col = {n: arr[:, j] for j, n in enumerate(names)}
+        return cls(
+            t=col["t"],
+            seat_acc=np.column_stack([col[c] for c in SEAT_COLUMNS]),
+            channels={n: col[n] for n in names if n != "t" and n not in SEAT_COLUMNS},
+            meta=dict(meta or {}),
+        )
 
     # -- properties --------------------------------------------------------------------
 
@@ -883,27 +953,13 @@ def read_timeseries(
             meta[k] = v
     header_line = skipped + 1
     header, body = _read_csv_rows("".join(lines[skipped:]), source, header_line)
-    if "t" not in header:
-        raise DataFormatError(f"{_where(source, header_line)}missing time column 't'")
-    missing = [c for c in SEAT_COLUMNS if c not in header]
-    if missing:
-        raise DataFormatError(
-            f"{_where(source, header_line)}missing seat acceleration column(s) {missing}"
-        )
-    for h in header:
-        if h == "t" or h in SEAT_COLUMNS:
-            continue
-        try:
-            parse_channel_name(h)
-        except DataFormatError as exc:
-            raise DataFormatError(
-                f"{_where(source, header_line, h)}unknown column: {exc}"
-            ) from None
+    _check_timeseries_columns(header, source, header_line)
     if not body:
         raise DataFormatError(f"{_where(source)}no data rows after the header")
     first = header_line + 1
-    cols = {h: _to_float_column([r[j] for r in body], h, source, first)
-            for j, h in enumerate(header)}
+    cols = {
+        h: _to_float_column([r[j] for r in body], h, source, first) for j, h in enumerate(header)
+    }
     ts = TimeSeriesData(
         t=cols["t"],
         seat_acc=np.column_stack([cols[c] for c in SEAT_COLUMNS]),
@@ -936,9 +992,7 @@ def read_data_dir(
         raise FileNotFoundError(f"data directory not found: {d}")
     f_frf, f_ts = d / FRF_FILENAME, d / TIMESERIES_FILENAME
     if not f_frf.is_file() and not f_ts.is_file():
-        raise FileNotFoundError(
-            f"{d}: contains neither {FRF_FILENAME} nor {TIMESERIES_FILENAME}"
-        )
+        raise FileNotFoundError(f"{d}: contains neither {FRF_FILENAME} nor {TIMESERIES_FILENAME}")
     frf = read_frf(f_frf) if f_frf.is_file() else None
     ts = read_timeseries(f_ts, **timeseries_kwargs) if f_ts.is_file() else None
     return frf, ts
@@ -952,7 +1006,7 @@ def read_data_dir(
 _TRANS_MEDIAN_HIGH = 50.0
 _TRANS_MEDIAN_LOW = 0.02
 #: Rotational gains in deg/m: the most responsive channel should exceed this if in deg.
-_ROT_MAX_MEDIAN_LOW = 1.0
+_ROT_MAX_MEDIAN_LOW = 3.0
 _ROT_MEDIAN_HIGH = 5000.0
 
 
@@ -966,7 +1020,7 @@ def check_units(frf: FrfData) -> list[str]:
     * in-axis translational channels (dof == direction): median gain > 50 or < 0.02 m/m
       suggests millimetres mixed with metres (factor 1000);
     * any translational channel with median gain > 50 m/m;
-    * rotational channels: if even the most responsive one has median gain < 1 deg/m the
+    * rotational channels: if even the most responsive one has median gain < 3 deg/m the
       gains are probably rad/m (factor 57.3) or deg/mm (factor 1000); a median > 5000 deg/m
       suggests per-mm seat displacement or millidegrees;
     * phase: all ``|phase_deg| <= pi`` over >= 20 rows suggests radians.
