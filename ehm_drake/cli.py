@@ -2,9 +2,9 @@
 
 Commands
 --------
-simulate        settle, vibrate, write time series, transmissibility, plots
+simulate          settle, vibrate, write time series, transmissibility, plots
 transmissibility  estimate frf.csv (+ figures) from a simulation or lab folder
-comfort         ISO 2631-1 comfort metrics of a simulation or lab folder
+comfort           ISO 2631-1 comfort metrics of a simulation or lab folder
 
 Errors in the input (parameter files, arguments, data) end the program with
 a one-line message and exit status 2; a simulation that blows up, with
@@ -111,6 +111,8 @@ def cmd_simulate(args) -> int:
     from .signals import make_seat_signal
     from .simulation import SettledState, settle, vibrate
 
+    if args.excitation == "csv" and not args.csv:
+        raise UsageError("--excitation csv needs --csv FILE (columns t, seat_ax, seat_ay, seat_az)")
     params = _load_model_params(args)
     measures = _measures(args)
     out = prepare_output_dir(args.out, args.force)
@@ -152,7 +154,8 @@ def cmd_simulate(args) -> int:
             "settle_posture_error_deg", "head_pitch_drift_deg", "head_pitch_deg",
             "trunk_T8_forward_drift_m", "backrest_force_n", "back_in_contact")},
     }
-    summary.update(_transmissibility_outputs(result, signal, model, out, files))
+    if signal.kind != "csv" or signal.meta.get("direction"):
+        summary.update(_transmissibility_outputs(result, signal, out, files))
     summary["files"] = sorted(files)
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     if not args.quiet:
@@ -160,32 +163,32 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def _transmissibility_outputs(result, signal, model, out: Path, files: list) -> dict:
-    """frf.csv, apparent_mass.csv, figure and a summary of the peaks."""
-    from .analysis.apparent import apparent_mass_table
-    from .analysis.dataio import TimeSeriesData
+def _transmissibility_outputs(result, signal, out: Path, files: list) -> dict:
+    """frf.csv, apparent_mass.csv and the transmissibility figures of a run."""
+    from .analysis.apparent_mass import apparent_mass_table
+    from .analysis.figures import plot_cases
     from .analysis.spectral import transmissibility
-    from .analysis.figures import plot_frf_grid
 
-    vib = result.after(signal.steady_start)
-    names, data = vib.timeseries_columns()
-    ts = TimeSeriesData.from_columns(names, data, meta={"direction": signal.meta["direction"],
-                                                         "level_rms": signal.meta["rms"]})
-    frf = transmissibility(ts)
+    vib = result.after(signal.settle_time)
+    frf = transmissibility(vib.to_timeseries())
     frf.to_csv(out / "frf.csv")
     files.append("frf.csv")
-    static_mass = float(np.mean(result.seat_forces[:, 2])) / 9.81
-    am = apparent_mass_table(vib, static_mass)
-    am.to_csv(out / "apparent_mass.csv", index=False) if hasattr(am, "to_csv") else None
+    dirs = "".join(d for d in "xyz" if d in signal.meta.get("direction", ""))
+    am = apparent_mass_table(vib.seat_acceleration, vib.pan_force(), vib.sample_rate, dirs)
+    am.to_csv(out / "apparent_mass.csv")
     files.append("apparent_mass.csv")
-    files.append(plot_frf_grid(frf, out / "transmissibility.png").name)
+    files += [p.name for p in plot_cases({result.meta["variant"]: frf}, out)]
+    return {"transmissibility_peaks": _peaks(frf),
+            "static_seated_mass_kg": am.static_mass_kg}
+
+
+def _peaks(frf) -> dict:
     peaks = {}
     for key in frf.channels():
-        sel = frf.select(*key[:3])
-        k = int(np.argmax(sel.gain))
-        peaks["/".join(key[:3])] = {"peak_gain": float(sel.gain[k]),
-                                    "peak_freq_hz": float(sel.freq_hz[k])}
-    return {"transmissibility_peaks": peaks}
+        f, gain, _, _ = frf.get(*key[:3])
+        k = int(np.argmax(gain))
+        peaks["/".join(key[:3])] = {"peak_gain": float(gain[k]), "peak_freq_hz": float(f[k])}
+    return peaks
 
 
 def _print_summary(summary: dict) -> None:
@@ -197,9 +200,82 @@ def _print_summary(summary: dict) -> None:
           f"{summary['backrest_force_n']['total']:.0f} N")
     peaks = summary.get("transmissibility_peaks", {})
     if peaks:
-        print("transmissibility peaks (gain @ Hz; m/m or deg/m):")
+        print("transmissibility peaks, gain (m/m or deg/m) @ frequency (Hz):")
         for key, v in peaks.items():
-            print(f"  {key:24s} {v['peak_gain']:8.3f} @ {v['peak_freq_hz']:5.2f}")
+            if v["peak_gain"] > 0.05:
+                print(f"  {key:24s} {v['peak_gain']:8.3f} @ {v['peak_freq_hz']:5.2f}")
+
+
+# ---------------------------------------------------------------------------
+# transmissibility, comfort
+# ---------------------------------------------------------------------------
+
+
+def cmd_transmissibility(args) -> int:
+    from .analysis.dataio import check_units, read_data_dir
+    from .analysis.figures import plot_cases
+    from .analysis.spectral import transmissibility
+
+    frf, ts = read_data_dir(args.data)
+    out = prepare_output_dir(args.out, args.force)
+    if ts is not None:
+        frf = transmissibility(ts)
+        source = "timeseries.csv"
+    else:
+        source = "frf.csv (as given)"
+    frf.to_csv(out / "frf.csv")
+    for w in check_units(frf):
+        print(f"warning: {w}", file=sys.stderr)
+    figs = plot_cases({"estimate": frf}, out, measured=None)
+    print(f"transmissibility from {source}: {len(frf.channels())} channels, "
+          f"{len(np.unique(frf.freq_hz))} frequencies -> {out / 'frf.csv'}, "
+          + ", ".join(p.name for p in figs))
+    return 0
+
+
+def _acceleration_from_displacement(t, d):
+    """Second central difference of displacement (m) -> acceleration (m/s^2)."""
+    dt = float(np.median(np.diff(t)))
+    a = np.zeros_like(d)
+    a[1:-1] = (d[2:] - 2 * d[1:-1] + d[:-2]) / dt**2
+    a[0], a[-1] = a[1], a[-2]
+    return a
+
+
+def cmd_comfort(args) -> int:
+    from .analysis.comfort import comfort_metrics
+    from .analysis.dataio import read_data_dir
+
+    _, ts = read_data_dir(args.data)
+    if ts is None:
+        raise UsageError(f"{args.data}: comfort needs timeseries.csv (seat acceleration)")
+    out = Path(args.out) if args.out else Path(args.data)
+    target = out / "comfort.json"
+    if target.exists() and not args.force:
+        raise UsageError(f"{target} exists; use --force to replace it")
+    out.mkdir(parents=True, exist_ok=True)
+    report = {"seat": _comfort_entry(comfort_metrics(ts.seat_acc, ts.fs, "seat"))}
+    head = [f"head_{a}" for a in "xyz"]
+    if all(h in ts.channels for h in head):
+        acc = _acceleration_from_displacement(
+            ts.t, np.column_stack([ts.channels[h] for h in head]))
+        report["head"] = _comfort_entry(comfort_metrics(acc, ts.fs, "head"))
+        report["head"]["note"] = ("from the absolute head displacement (second difference); "
+                                  "seat weightings (Wd x, y; Wk z), factors 1")
+    target.write_text(json.dumps(report, indent=2))
+    print(f"{'':6s} {'a_w x':>8s} {'a_w y':>8s} {'a_w z':>8s} {'overall':>8s} "
+          f"{'VDV z':>8s} {'MSDV z':>8s}   (m/s^2, m/s^1.75, m/s^1.5)")
+    for loc, m in report.items():
+        w = m["weighted_rms"]
+        print(f"{loc:6s} {w['x']:8.4f} {w['y']:8.4f} {w['z']:8.4f} {m['overall']:8.4f} "
+              f"{m['vdv']['z']:8.4f} {m['msdv_z']:8.4f}")
+    print(f"-> {target}")
+    return 0
+
+
+def _comfort_entry(m: dict) -> dict:
+    keep = ("weighted_rms", "overall", "vdv", "mtvv", "crest_factor", "msdv_z", "weightings", "k")
+    return {k: m[k] for k in keep if k in m}
 
 
 # ---------------------------------------------------------------------------
@@ -234,6 +310,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("transmissibility", help="estimate frf.csv and figures from a "
+                       "simulation or lab data folder (H1, 0-12 Hz band-pass)")
+    p.add_argument("data", metavar="SIM_OR_DATA_DIR")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=cmd_transmissibility)
+
+    p = sub.add_parser("comfort", help="ISO 2631-1 comfort metrics of the seat (and head)")
+    p.add_argument("data", metavar="SIM_OR_DATA_DIR")
+    p.add_argument("--out", metavar="DIR", help="where to write comfort.json (default: the "
+                   "data folder)")
+    p.add_argument("--force", action="store_true", help="replace an existing comfort.json")
+    p.set_defaults(func=cmd_comfort)
     return parser
 
 

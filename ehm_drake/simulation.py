@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
+from .analysis.dataio import TimeSeriesData
 from .diagram import SEAT_FORCE_NAMES, EhmDiagram, build_diagram
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import PASSIVE_GROUPS, ModelParams
@@ -126,14 +127,15 @@ def _fixed_inputs(model: EhmDiagram, context) -> None:
             d.GetInputPort(name).FixValue(context, np.zeros(3))
 
 
-def static_equilibrium(model: EhmDiagram, tol: float = 1e-9, max_iterations: int = 30,
+def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int = 30,
                        seat_in: bool = True):
     """Fixed point of the discrete closed-loop dynamics without excitation.
 
     Unknowns: the plant positions q and the PID integrals z (v = 0); the
-    equations: v+ = 0 (no motion after a step) and q - q_ref = 0 on the
-    integrating joints (the integrators are at rest).  Newton iterations with
-    a finite-difference Jacobian of the discrete step.
+    equations: v+ = 0 (no motion after a step; as the net generalized force
+    M v+ / h, tolerance `tol` in N or N m) and q - q_ref = 0 on the
+    integrating joints (the integrators are at rest; tolerance `tol` rad).
+    Newton iterations with a finite-difference Jacobian of the discrete step.
 
     With `seat_in`, the vertical shear of the backrest pads is relaxed as the
     body sinks into the seat (the anchors slip, as the back slides down the
@@ -160,10 +162,15 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-9, max_iterations: int
     gains = pid.GetMyContextFromRoot(ctx).get_numeric_parameter(pid.parameter_index)
     reference = gains.CopyToVector()[4 * layout.num_rotational:]
 
+    pctx = model.plant_context(ctx)
+
     def residual(xv):
+        # Net generalized force M (v+ - 0)/h: scaled by the inertia, the
+        # Jacobian is ~ the stiffness matrix, far better conditioned than that
+        # of the accelerations (tiny inertias of the neck and feet).
         smap.set(ctx, xv)
         xn = smap.step(ctx)
-        r = [xn[ps][nq:] / h]
+        r = [plant.CalcMassMatrix(pctx) @ xn[ps][nq:] / h]
         if integrating:
             r.append(xv[ps][layout.rot_q] - reference)
         return np.concatenate(r)
@@ -245,22 +252,31 @@ class SimulationResult:
     def sample_rate(self) -> float:
         return 1.0 / float(np.median(np.diff(self.times)))
 
-    def timeseries_columns(self) -> tuple[list[str], np.ndarray]:
-        """Columns of the lab format: t, seat_a*, <segment>_<dof> (m, deg)."""
+    def to_timeseries(self) -> TimeSeriesData:
+        """The run in the measured-data format (channels in m and deg), with
+        the excitation direction and level as metadata."""
         rot = np.array([name.split("_")[-1] in ("roll", "pitch", "yaw")
                         for name in CHANNEL_NAMES])
         ch = self.channels.copy()
         ch[:, rot] = np.degrees(ch[:, rot])
-        names = ["t", "seat_ax", "seat_ay", "seat_az", *CHANNEL_NAMES]
-        return names, np.column_stack([self.times, self.seat_acceleration, ch])
+        sig = self.meta.get("signal", {})
+        meta = {k: sig[k] for k in ("direction",) if k in sig}
+        if "rms" in sig and sig.get("kind") != "csv":
+            meta["level_rms"] = sig["rms"]
+        return TimeSeriesData(self.times, self.seat_acceleration,
+                              dict(zip(CHANNEL_NAMES, ch.T, strict=True)), meta)
+
+    def pan_force(self) -> np.ndarray:
+        """(N, 3) force of the seat pan on the body, N."""
+        i = SEAT_FORCE_NAMES.index("pan_fx")
+        return self.seat_forces[:, i:i + 3]
 
     def write_csv(self, directory: str | Path) -> list[Path]:
         """timeseries.csv (lab format), seat_forces.csv, joint_torques.csv."""
         directory = Path(directory)
-        names, data = self.timeseries_columns()
         paths = [directory / "timeseries.csv", directory / "seat_forces.csv",
                  directory / "joint_torques.csv"]
-        _write_csv(paths[0], names, data)
+        self.to_timeseries().to_csv(paths[0])
         _write_csv(paths[1], ["t", *SEAT_FORCE_NAMES],
                    np.column_stack([self.times, self.seat_forces]))
         _write_csv(paths[2], ["t", *[f"torque_{n}" for n in self.joint_names],

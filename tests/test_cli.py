@@ -1,0 +1,109 @@
+"""The command line: the main job end to end, files, and bad input."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from ehm_drake.analysis.dataio import read_frf, read_timeseries
+from ehm_drake.cli import main
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim") / "run"
+    assert main(["simulate", "--duration", "12", "--direction", "z", "--seed", "3",
+                 "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_simulate_writes_summary_series_and_plots(sim_dir):
+    summary = json.loads((sim_dir / "summary.json").read_text())
+    assert summary["dof"] == 31 and summary["segments"] == 12
+    assert summary["mass_kg"] == pytest.approx(75.3, abs=0.5)
+    assert summary["real_time_factor"] > 0
+    assert set(summary["settle_posture_error_deg"]) == {
+        "lumbar", "thoracic", "neck", "hips", "knees", "ankles"}
+    assert abs(summary["head_pitch_drift_deg"]) < 0.5
+    assert summary["backrest_force_n"]["total"] > 0
+    assert summary["seat_rms_measured"]["z"] == pytest.approx(0.1941, rel=0.01)
+    for name in ("timeseries.csv", "seat_forces.csv", "joint_torques.csv", "frf.csv",
+                 "apparent_mass.csv", "posture.png", "responses.png",
+                 "transmissibility_z.png", "settled_state.npz"):
+        assert (sim_dir / name).stat().st_size > 0, name
+    ts = read_timeseries(sim_dir / "timeseries.csv", min_duration=5.0)
+    assert ts.fs == pytest.approx(200.0)
+    assert ts.meta["direction"] == "z"
+    frf = read_frf(sim_dir / "frf.csv")
+    f, gain, _, coh = frf.get("z", "head", "z")
+    assert gain.max() > 1.0  # a vertical resonance amplifies the head
+
+
+def test_restart_from_settled_state(sim_dir, tmp_path):
+    out = tmp_path / "again"
+    assert main(["simulate", "--duration", "3", "--settled", str(sim_dir / "settled_state.npz"),
+                 "--out", str(out), "--quiet"]) == 0
+
+
+def test_comfort_and_transmissibility_commands(sim_dir, tmp_path):
+    assert main(["comfort", str(sim_dir), "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "comfort.json").read_text())
+    assert report["seat"]["weighted_rms"]["z"] > 0.05
+    assert report["seat"]["weighted_rms"]["x"] < 1e-9
+    assert "head" in report
+    # Refuses to overwrite without --force.
+    assert main(["comfort", str(sim_dir), "--out", str(tmp_path)]) == 2
+    out = tmp_path / "tr"
+    assert main(["transmissibility", str(sim_dir), "--out", str(out)]) == 0
+    assert (out / "frf.csv").is_file() and (out / "transmissibility_z.png").is_file()
+
+
+def test_existing_output_folder_is_not_overwritten(sim_dir, capsys):
+    before = (sim_dir / "summary.json").read_bytes()
+    assert main(["simulate", "--duration", "2", "--out", str(sim_dir), "--quiet"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (sim_dir / "summary.json").read_bytes() == before
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["simulate", "--rms", "-1", "--out", "x"], "positive"),
+    (["simulate", "--direction", "w", "--out", "x"], "invalid choice"),
+    (["simulate", "--duration", "abc", "--out", "x"], "number"),
+    (["simulate", "--seed", "-2", "--out", "x"], ">= 0"),
+    (["simulate", "--variant", "stiff", "--out", "x"], "invalid choice"),
+])
+def test_bad_arguments_exit_with_usage(argv, match, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    assert match in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra,match", [
+    (["--stature", "176"], "centimetres"),
+    (["--rms", "194.1"], "mm/s"),
+    (["--excitation", "csv"], "--csv FILE"),
+])
+def test_bad_values_give_one_line_errors(tmp_path, extra, match, capsys):
+    code = main(["simulate", "--out", str(tmp_path / "o"), "--quiet", *extra])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert match in err and "Traceback" not in err
+
+
+def test_bad_parameter_file(tmp_path, capsys):
+    f = tmp_path / "p.yaml"
+    f.write_text("passive:\n  neck:\n    stiffness: [-1, 1, 1]\n")
+    assert main(["simulate", "--params", str(f), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert "passive.neck.stiffness[0]" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_unstable_parameters_exit_3(tmp_path, capsys):
+    f = tmp_path / "p.yaml"
+    f.write_text("pid:\n  neck:\n    kd: [60, 60, 60]\n")
+    code = main(["simulate", "--params", str(f), "--duration", "2", "--direction", "xyz",
+                 "--rms", "0.5", "--out", str(tmp_path / "o"), "--quiet"])
+    assert code == 3
+    assert "diverged" in capsys.readouterr().err
