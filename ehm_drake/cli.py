@@ -3,6 +3,7 @@
 Commands
 --------
 simulate          settle, vibrate, write time series, transmissibility, plots
+modes             linearize the closed loop: modes, shapes, participation, linear FRF
 transmissibility  estimate frf.csv (+ figures) from a simulation or lab folder
 comfort           ISO 2631-1 comfort metrics of a simulation or lab folder
 
@@ -279,6 +280,76 @@ def _comfort_entry(m: dict) -> dict:
 
 
 # ---------------------------------------------------------------------------
+# modes
+# ---------------------------------------------------------------------------
+
+#: Channels of the paper's validation per loading case (Desai et al. III-A).
+PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis", "pitch"),
+                        ("trunk", "pitch"), ("head", "pitch")],
+                  "y": [("pelvis", "y"), ("trunk", "y"), ("head", "y"), ("trunk", "roll"),
+                        ("head", "roll"), ("trunk", "yaw"), ("head", "yaw")],
+                  "z": [("pelvis", "z"), ("trunk", "z"), ("head", "z"), ("trunk", "pitch"),
+                        ("head", "pitch")]}
+
+
+def cmd_modes(args) -> int:
+    from .analysis.figures import plot_cases
+    from .analysis.linear import default_frequencies, linearize
+    from .diagram import build_diagram
+    from .plots import plot_mode_shapes, plot_poles
+
+    params = _load_model_params(args)
+    measures = _measures(args)
+    out = prepare_output_dir(args.out, args.force)
+    t0 = time.perf_counter()
+    model = build_diagram(params, measures, None, args.variant, guard=False)
+    lm = linearize(model, method=args.method)
+    modes = lm.modes()
+    wall = time.perf_counter() - t0
+    (out / "modes.json").write_text(json.dumps([m.to_dict() for m in modes], indent=1))
+    f = default_frequencies()
+    frf = lm.transmissibility(f)
+    frf.to_csv(out / "frf_linear.csv")
+    participation = []
+    for d, channels in PAPER_CHANNELS.items():
+        for seg, dof in channels:
+            ff, gain, _, _ = frf.get(d, seg, dof)
+            k = int(np.argmax(gain))
+            top = lm.participation(d, f"{seg}_{dof}", float(ff[k]))
+            participation.append({
+                "direction": d, "segment": seg, "dof": dof, "peak_freq_hz": float(ff[k]),
+                "peak_gain": float(gain[k]),
+                "modes": [{"index": m.index, "freq_hz": m.freq_hz, "label": m.label,
+                           "share": share} for m, share in top]})
+    (out / "participation.json").write_text(json.dumps(participation, indent=1))
+    rows = ["| # | f (Hz) | zeta | kind | mode |", "|---|---|---|---|---|"]
+    rows += [f"| {m.index} | {m.freq_hz:.3f} | {m.damping_ratio:.3f} | {m.kind} | {m.label} |"
+             for m in modes if m.kind != "slip" and m.freq_hz <= args.max_freq]
+    nslip = sum(m.kind == "slip" for m in modes)
+    rows.append(f"\n{nslip} slip-anchor states (z = 1, static, uncontrollable) not tabulated; "
+                "see modes.json.")
+    (out / "modal_table.md").write_text("\n".join(rows) + "\n")
+    shown = [m for m in modes if m.kind in ("oscillatory", "unstable")
+             and 0.3 < m.freq_hz <= 12.0][:12]
+    figs = [plot_mode_shapes(model, lm, shown, out / "mode_shapes.png").name,
+            plot_poles(modes, out / "poles.png").name]
+    figs += [p.name for p in plot_cases({f"linear ({args.variant})": frf}, out,
+                                        prefix="transmissibility_linear")]
+    unstable = [m for m in modes if m.kind == "unstable"]
+    print(f"linearized ({lm.method}, {lm.A.shape[0]} states) and analysed in {wall:.2f} s; "
+          f"{'UNSTABLE' if unstable else 'stable'}")
+    for m in modes:
+        if m.kind in ("oscillatory", "unstable") and m.freq_hz <= args.max_freq:
+            print(f"  {m.freq_hz:7.3f} Hz  zeta {m.damping_ratio:6.3f}  {m.label}")
+    for m in unstable:
+        print(f"unstable mode {m.index}: {m.label}, growth rate {m.s.real:.2f} 1/s at "
+              f"{m.freq_hz:.2f} Hz", file=sys.stderr)
+    print(f"-> {out}: modes.json, frf_linear.csv, participation.json, modal_table.md, "
+          + ", ".join(figs))
+    return 3 if unstable else 0
+
+
+# ---------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------
 
@@ -310,6 +381,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("modes", help="linearize the closed loop; modes, shapes, linear FRF")
+    _add_model_arguments(p)
+    p.add_argument("--method", choices=("auto", "fd", "autodiff"), default="auto",
+                   help="linearization: Drake AutoDiff where supported, else finite "
+                   "differences (auto)")
+    p.add_argument("--max-freq", type=_positive("--max-freq"), default=15.0, metavar="HZ",
+                   help="list modes up to this frequency (default %(default)s)")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=cmd_modes)
 
     p = sub.add_parser("transmissibility", help="estimate frf.csv and figures from a "
                        "simulation or lab data folder (H1, 0-12 Hz band-pass)")

@@ -190,7 +190,7 @@ def build_diagram(
     loggers = {}
     if log_period is not None:
         for name in ("channels", "seat_forces", "joint_torques", "his_torque",
-                     "seat_acceleration", "seat_displacement"):
+                     "seat_acceleration", "seat_displacement", "state"):
             port = outputs[name]
             log = builder.AddNamedSystem(f"log_{name}", VectorLogSink(port.size(), log_period))
             builder.Connect(port, log.get_input_port())

@@ -52,11 +52,12 @@ class StateMap:
     """The diagram's discrete state groups (plant, PID, restraints) as one
     stacked vector, in the order of the diagram's own discrete values."""
 
-    def __init__(self, model: EhmDiagram):
-        self.model = model
-        systems = [s for s in model.diagram.GetSystems() if s.num_discrete_state_groups() > 0]
+    def __init__(self, model):
+        """`model`: an EhmDiagram or any Drake Diagram with discrete states."""
+        self.diagram = model.diagram if isinstance(model, EhmDiagram) else model
+        systems = [s for s in self.diagram.GetSystems() if s.num_discrete_state_groups() > 0]
         # Find the diagram's group order by tagging each subsystem's state.
-        ctx = model.diagram.CreateDefaultContext()
+        ctx = self.diagram.CreateDefaultContext()
         for i, s in enumerate(systems):
             sub = s.GetMyMutableContextFromRoot(ctx).get_mutable_discrete_state()
             sub.get_mutable_vector(0).SetFromVector(np.full(sub.get_vector(0).size(), i + 0.5))
@@ -83,7 +84,7 @@ class StateMap:
 
     def step(self, root_context) -> np.ndarray:
         """The discrete update map x+ = F(x) at the current context."""
-        values = self.model.diagram.EvalUniquePeriodicDiscreteUpdate(root_context)
+        values = self.diagram.EvalUniquePeriodicDiscreteUpdate(root_context)
         return np.concatenate([values.get_vector(g).CopyToVector()
                                for g in range(values.num_groups())])
 
@@ -233,6 +234,8 @@ class SimulationResult:
     his_torque: np.ndarray  # (N, 3); N m
     joint_names: tuple[str, ...]
     meta: dict = field(default_factory=dict)
+    #: (N, 31) plant generalized positions q (for 3D replay), in S.
+    positions: np.ndarray | None = None
 
     channel_names = CHANNEL_NAMES
     seat_force_names = SEAT_FORCE_NAMES
@@ -246,7 +249,8 @@ class SimulationResult:
         return SimulationResult(self.times[k], self.seat_acceleration[k],
                                 self.seat_displacement[k], self.channels[k],
                                 self.seat_forces[k], self.joint_torques[k],
-                                self.his_torque[k], self.joint_names, dict(self.meta))
+                                self.his_torque[k], self.joint_names, dict(self.meta),
+                                None if self.positions is None else self.positions[k])
 
     @property
     def sample_rate(self) -> float:
@@ -451,6 +455,7 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
         joint_torques=logs["joint_torques"].data().T,
         his_torque=logs["his_torque"].data().T,
         joint_names=model.joint_names,
+        positions=logs["state"].data().T[:, :model.plant.num_positions()],
         meta={
             "variant": variant,
             "signal": signal.meta,

@@ -102,7 +102,7 @@ def test_bad_parameter_file(tmp_path, capsys):
 
 def test_unstable_parameters_exit_3(tmp_path, capsys):
     f = tmp_path / "p.yaml"
-    f.write_text("pid:\n  neck:\n    kd: [60, 60, 60]\n")
+    f.write_text("his:\n  kd: [60, 60, 60]\n")
     code = main(["simulate", "--params", str(f), "--duration", "2", "--direction", "xyz",
                  "--rms", "0.5", "--out", str(tmp_path / "o"), "--quiet"])
     assert code == 3

@@ -499,6 +499,7 @@ def transmissibility(
     detrend: str | bool = "constant",
     filter_order: int = 4,
     multi_axis_ratio: float = 0.3,
+    f_min: float = 0.0,
 ) -> FrfData:
     """Seat-to-body transmissibility from time histories, as an :class:`FrfData` table.
 
@@ -546,6 +547,9 @@ def transmissibility(
         Butterworth order (see :func:`band_filter`).
     multi_axis_ratio : float
         Relative RMS threshold for auto-detecting excited axes.
+    f_min : float
+        Only rows with ``f > f_min`` are returned (e.g. below a multisine's
+        lowest line, where the seat has no power).
 
     Returns
     -------
@@ -591,7 +595,7 @@ def transmissibility(
     else:
         mest = mimo_h1(seat[:, cols], Y2, fs, nperseg, noverlap, window, detrend)
         f, Hs, coh = mest.f, mest.H, mest.multiple_coherence
-    sel = (f > 0) & (f <= f_max + 1e-9 * f_max)
+    sel = (f > max(f_min, 0.0)) & (f <= f_max + 1e-9 * f_max)
     if not np.any(sel):
         raise ValueError(f"no frequency bin in (0, {f_max}] Hz; use a longer nperseg")
     f, Hs, coh = f[sel], Hs[sel], coh[sel]

@@ -274,9 +274,19 @@ def pid_vectors(params: ModelParams, layout: JointLayout) -> dict[str, np.ndarra
 
 
 def _joint_damping(params: ModelParams, joint) -> np.ndarray:
+    """Joint damping = passive damping + the PID's derivative gain.
+
+    The derivative action -Kd v is exactly a joint damper, and as joint
+    damping SAP integrates it implicitly.  Applied as an explicit force it
+    is unstable on the 2.3 kg lower-torso slab between L5/S1 and L4/L5 at
+    1 ms (c h / I ~ 1.8 of the limit 2); so the PID applies P and I and the
+    plant applies D (the PID still reports the full P+I+D torque)."""
     for group, joints in PASSIVE_GROUPS.items():
         if joint.name() in joints:
-            return np.asarray(getattr(params.passive, group).damping, float)[_joint_axes(joint)]
+            axes = _joint_axes(joint)
+            passive = np.asarray(getattr(params.passive, group).damping, float)[axes]
+            kd = np.asarray(getattr(params.pid, PID_GROUP_OF[group]).kd, float)[axes]
+            return passive + kd
     raise KeyError(joint.name())
 
 
@@ -291,7 +301,8 @@ def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
 
 
 def set_joint_damping(hp: HumanPlant, plant_context, params: ModelParams) -> None:
-    """Write the joint damping of `params` into `plant_context`."""
+    """Write the joint damping (passive + PID derivative gain) of `params`
+    into `plant_context`."""
     for joints in PASSIVE_GROUPS.values():
         for jname in joints:
             joint = hp.plant.GetJointByName(jname, hp.human)

@@ -144,9 +144,10 @@ def JointPid_(T):
         """
 
         def _construct(self, layout: JointLayout, kp, ki, kd, integral_limit, reference,
-                       period: float, converter=None):
+                       period: float, derivative_in_plant: bool = True, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._layout = layout
+            self._derivative_in_plant = bool(derivative_in_plant)
             n = layout.num_rotational
             parts = [np.asarray(a, float) for a in (kp, ki, kd, integral_limit, reference)]
             for a in parts:
@@ -169,7 +170,8 @@ def JointPid_(T):
         def _construct_copy(self, other, converter=None):
             n = other._layout.num_rotational
             parts = [other._init[i * n:(i + 1) * n] for i in range(5)]
-            Impl._construct(self, other._layout, *parts, other._period, converter=converter)
+            Impl._construct(self, other._layout, *parts, other._period,
+                            other._derivative_in_plant, converter=converter)
 
         @property
         def parameter_index(self):
@@ -189,9 +191,15 @@ def JointPid_(T):
             output.SetFromVector(-(g[:n] * e + g[n:2 * n] * z + g[2 * n:3 * n] * x[L.nq + L.rot_v]))
 
         def _calc_force(self, context, output):
+            L = self._layout
             tau = self._torque_port.Eval(context)
-            f = np.zeros(self._layout.nv, dtype=tau.dtype)
-            f[self._layout.rot_v] = tau
+            if self._derivative_in_plant:
+                n = L.num_rotational
+                g = context.get_numeric_parameter(self._param).CopyToVector()
+                x = self._state_port.Eval(context)
+                tau = tau + g[2 * n:3 * n] * x[L.nq + L.rot_v]  # the plant applies -Kd v
+            f = np.zeros(L.nv, dtype=tau.dtype)
+            f[L.rot_v] = tau
             output.SetFromVector(f)
 
         def _calc_bound(self, context, value):

@@ -1,0 +1,61 @@
+"""The linear FRF against the transmissibility estimated from the nonlinear
+time simulation at small amplitude (modal issue acceptance).
+
+The seat signal is a multisine (0.05 Hz grid, 0.1-12 Hz, seeded phases,
+0.05 m/s^2 RMS, 120 s): its 20 s period makes the H1 estimate over whole
+periods (rectangular window, no overlap, no band filter) free of leakage
+bias, so the comparison measures the model, not the estimator.  (With
+random excitation the same check is limited by H1's resolution bias at the
+sharp lateral peak, ~10% at 0.075 Hz resolution.)"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ehm_drake.analysis.linear import linearize
+from ehm_drake.analysis.spectral import transmissibility
+from ehm_drake.diagram import build_diagram
+from ehm_drake.signals import make_seat_signal
+from ehm_drake.simulation import vibrate
+from ehm_drake.systems.outputs import CHANNEL_NAMES
+
+DOMINANT = {"x": [("head", "x"), ("head", "pitch"), ("trunk", "x")],
+            "y": [("head", "y"), ("head", "roll")],
+            "z": [("pelvis", "z"), ("head", "z")]}
+PERIOD_S = 20.0
+
+
+@pytest.fixture(scope="module")
+def linear_model(params):
+    return linearize(build_diagram(params, guard=False))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("direction", ["x", "y", "z"])
+def test_linear_frf_matches_nonlinear_simulation(params, settled_default, linear_model,
+                                                 direction):
+    s = params.simulation
+    sig = make_seat_signal("multisine", direction, 0.05, 120.0, 21, s.time_step_s,
+                           s.settle_time_s, s.onset_time_s)
+    run = vibrate(params, settled_default, sig)
+    # Whole periods after the first (onset and transients).
+    steady = run.after(sig.settle_time + PERIOD_S)
+    n = int(round(PERIOD_S * steady.sample_rate))
+    steady = steady.after(steady.times[0])
+    ts = steady.to_timeseries()
+    ts = type(ts)(ts.t[:5 * n], ts.seat_acc[:5 * n],
+                  {k: v[:5 * n] for k, v in ts.channels.items()}, ts.meta)
+    est = transmissibility(ts, band=None, nperseg=n, noverlap=0, window="boxcar", f_min=0.075)
+    worst = 0.0
+    for seg, dof in DOMINANT[direction]:
+        f, gain, _, coh = est.get(direction, seg, dof)
+        lines = np.abs(f / 0.05 - np.round(f / 0.05)) < 1e-6  # excited lines
+        ok = lines & (coh > 0.9) & (f >= 0.1)
+        assert ok.sum() > 100, (seg, dof)
+        c = CHANNEL_NAMES.index(f"{seg}_{dof}")
+        lin = np.abs(linear_model.transmissibility_array(f[ok], direction)[:, c, 0])
+        err = np.max(np.abs(gain[ok] - lin) / lin)
+        worst = max(worst, err)
+        assert err < 0.10, (seg, dof, err)
+    print(f"\ndirection {direction}: worst relative gain error {worst:.4f}")

@@ -1,0 +1,279 @@
+"""3D visualization: the HTML recordings are self-contained and hold the animation
+(decoded), bad input is named, and a headless Chromium renders the recording."""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import io
+import re
+import subprocess
+from pathlib import Path
+
+import matplotlib.image as mpimg
+import numpy as np
+import pytest
+
+from ehm_drake.model.anthropometry import REFERENCE, BodyMeasures
+from ehm_drake.params import params_from_dict
+from ehm_drake.viz import (
+    VizError,
+    add_viz_arguments,
+    build_viewer,
+    handle_viz,
+    live_view,
+    mode_animation_html,
+    positions_from_result,
+    record_html,
+)
+
+CHROMIUM = Path("/usr/bin/chromium")
+needs_chromium = pytest.mark.skipif(
+    not CHROMIUM.exists(),
+    reason="/usr/bin/chromium is not installed (apt-get install -y chromium); CI installs it")
+
+# Headless Chromium with software WebGL (SwiftShader), no network or background
+# services; --virtual-time-budget lets the page's timers (the animation) advance
+# that many virtual ms before the screenshot.
+CHROMIUM_FLAGS = (
+    "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+    "--disable-quic", "--no-first-run", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--window-size=800,600",
+)
+#: Console messages of SwiftShader itself (performance notes), not of the page.
+BENIGN_CONSOLE = ("GL Driver Message",)
+
+
+@pytest.fixture(scope="module")
+def viewer_params():
+    return params_from_dict({})
+
+
+@pytest.fixture(scope="module")
+def motion(viewer_params):
+    """2 s of synthetic motion at 200 Hz: the pelvis bobs 2 cm at 1 Hz, the
+    trunk pitches 0.1 rad at 0.5 Hz (no simulation needed)."""
+    v = build_viewer(viewer_params)
+    q0 = v.plant.GetPositions(v.plant_context)
+    t = np.arange(401) / 200.0
+    q = np.tile(q0, (t.size, 1))
+    q[:, 5] += 0.02 * np.sin(2 * np.pi * t)
+    q[:, 14] += 0.1 * np.sin(np.pi * t)
+    return t, q
+
+
+def _commands(html: str) -> list[dict]:
+    """The Meshcat commands embedded in a StaticHtml page (msgpack in data URLs)."""
+    msgpack = pytest.importorskip("msgpack")
+    blobs = re.findall(r'fetch\("data:application/octet-binary;base64,([A-Za-z0-9+/=]+)"\)',
+                       html)
+    return [msgpack.unpackb(base64.b64decode(b)) for b in blobs]
+
+
+def _animation(html: str) -> dict:
+    anims = [c for c in _commands(html) if c.get("type") == "set_animation"]
+    assert len(anims) == 1
+    return anims[0]
+
+
+def _track(anim: dict, body: str, prop: str) -> list:
+    for a in anim["animations"]:
+        if a["path"].endswith(f"/{body}"):
+            for tr in a["clip"]["tracks"]:
+                if tr["name"] == f".{prop}":
+                    return tr["keys"]
+    raise AssertionError(f"no {prop} track for {body}")
+
+
+def test_record_html_is_self_contained_and_holds_the_animation(tmp_path, viewer_params,
+                                                                motion):
+    t, q = motion
+    path = record_html(viewer_params, REFERENCE, t, q, tmp_path / "run.html", fps=30)
+    html = path.read_text()
+    # Self-contained: viewer code inline, nothing loaded from the network.
+    assert "MeshCat.Viewer" in html and len(html) > 1_000_000
+    assert not re.search(r"<script[^>]*\bsrc\s*=", html, re.I)
+    assert not re.search(r"<link[^>]*\bhref\s*=\s*[\"']?(https?:)?//", html, re.I)
+    assert not re.search(r"@import\s+url\(\s*[\"']?https?:", html, re.I)
+    anim = _animation(html)
+    assert anim["options"]["play"]
+    paths = {a["path"].rsplit("/", 1)[-1] for a in anim["animations"]}
+    assert {"pelvis", "upper_torso", "head", "thigh_l", "foot_r"} <= paths
+    assert all(a["clip"]["fps"] == pytest.approx(30.0) for a in anim["animations"])
+    # 2 s at 30 frames/s: 61 frames, one key per frame.
+    pelvis = _track(anim, "pelvis", "position")
+    assert len(pelvis) == 61
+    assert [k["time"] for k in pelvis[:3]] == [0, 1, 2]
+    z = np.array([k["value"][2] for k in pelvis])
+    # The pelvis bobs +-2 cm at 1 Hz: frame 7.5 (0.25 s) is the top.
+    assert np.ptp(z) == pytest.approx(0.04, abs=2e-3)
+    assert z[15] - z[0] == pytest.approx(0.0, abs=1e-9)  # t = 0.5 s: back to the start
+    # The first frame is the plant's own pelvis pose at q(0).
+    v = build_viewer(viewer_params)
+    v.plant.SetPositions(v.plant_context, q[0])
+    X = v.plant.EvalBodyPoseInWorld(v.plant_context, v.plant.GetBodyByName("pelvis"))
+    np.testing.assert_allclose(pelvis[0]["value"], X.translation(), atol=1e-12)
+    # The trunk moves, the feet (leg joints at rest) only follow the pelvis.
+    head = np.array([k["value"] for k in _track(anim, "head", "position")])
+    assert np.ptp(head[:, 0]) > 0.02
+
+
+def test_playback_speed_sets_the_number_of_frames(tmp_path, viewer_params, motion):
+    t, q = motion
+    html = record_html(viewer_params, REFERENCE, t, q, tmp_path / "slow.html", speed=0.5,
+                       fps=20).read_text()
+    anim = _animation(html)
+    assert len(_track(anim, "pelvis", "position")) == 81  # 2 s at half speed, 20 frames/s
+
+
+def test_mode_animation_two_cycles(tmp_path, viewer_params):
+    v = build_viewer(viewer_params)
+    q0 = v.plant.GetPositions(v.plant_context)
+    shape = np.zeros(31, complex)
+    shape[5] = 1j  # pelvis z, 90 deg out of phase
+    path = mode_animation_html(viewer_params, REFERENCE, q0, shape, 4.2, tmp_path / "m.html",
+                               amplitude=0.01, cycle_time_s=1.0, fps=30)
+    anim = _animation(path.read_text())
+    assert anim["options"]["repetitions"] > 1  # looped
+    z = np.array([k["value"][2] for k in _track(anim, "pelvis", "position")])
+    assert len(z) == 60  # two cycles of 1 s at 30 frames/s
+    # Re(j e^{j phi}) = -sin(phi): two cycles of a 1 cm sine, starting at rest.
+    phi = 2 * np.pi * 2 * np.arange(60) / 60
+    np.testing.assert_allclose(z - z[0], -0.01 * np.sin(phi), atol=1e-9)
+
+
+def test_bad_input_is_named(tmp_path, viewer_params, motion):
+    t, q = motion
+    with pytest.raises(VizError, match="30 columns.*31"):
+        record_html(viewer_params, REFERENCE, t, q[:, :30], tmp_path / "a.html")
+    with pytest.raises(VizError, match="shape"):
+        record_html(viewer_params, REFERENCE, t[:-1], q, tmp_path / "a.html")
+    bad = t.copy()
+    bad[5] = bad[4]
+    with pytest.raises(VizError, match=r"times must increase strictly \(times\[5\]"):
+        record_html(viewer_params, REFERENCE, bad, q, tmp_path / "a.html")
+    qn = q.copy()
+    qn[3, 7] = np.nan
+    with pytest.raises(VizError, match="sample 3, column 7"):
+        record_html(viewer_params, REFERENCE, t, qn, tmp_path / "a.html")
+    with pytest.raises(VizError, match="speed"):
+        record_html(viewer_params, REFERENCE, t, q, tmp_path / "a.html", speed=0)
+    with pytest.raises(VizError, match="does not exist"):
+        record_html(viewer_params, REFERENCE, t, q, tmp_path / "nope" / "a.html")
+    with pytest.raises(VizError, match="params must be a ModelParams"):
+        record_html({}, REFERENCE, t, q, tmp_path / "a.html")
+    with pytest.raises(VizError, match="shape_q"):
+        mode_animation_html(viewer_params, REFERENCE, None, np.ones(30), 2.0,
+                            tmp_path / "m.html")
+    with pytest.raises(VizError, match="freq_hz"):
+        mode_animation_html(viewer_params, REFERENCE, None, np.ones(31), -1.0,
+                            tmp_path / "m.html")
+    with pytest.raises(VizError, match="no plant positions"):
+        positions_from_result(argparse.Namespace(times=t))
+
+
+def test_replay_of_a_simulation(tmp_path):
+    from ehm_drake.simulation import simulate
+
+    params = params_from_dict({"simulation": {"settle_time_s": 0.3, "onset_time_s": 0.5}})
+    body = BodyMeasures(mass_kg=60.0, stature_m=1.62)
+    _, result = simulate(params, body, duration=1.5, rms=1.0, direction="x")
+    q = positions_from_result(result)
+    assert q.shape == (result.times.size, 31)
+    assert np.ptp(q[:, 3]) > 1e-4  # the pelvis moves fore-aft
+    path = record_html(params, body, result.times, q, tmp_path / "sim.html")
+    pelvis = _track(_animation(path.read_text()), "pelvis", "position")
+    assert len(pelvis) == int(np.floor((result.times[-1] - result.times[0]) * 30 + 1e-9)) + 1
+
+
+def test_handle_viz_and_live_view(tmp_path, viewer_params, motion, monkeypatch):
+    t, q = motion
+    parser = argparse.ArgumentParser()
+    add_viz_arguments(parser)
+    assert handle_viz(parser.parse_args([]), viewer_params, REFERENCE, (t, q)) is None
+    out = tmp_path / "cli.html"
+    args = parser.parse_args(["--record", str(out), "--meshcat", "--viz-speed", "2"])
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))  # not a terminal: no wait
+    meshcat = handle_viz(args, viewer_params, REFERENCE, (t, q))
+    assert meshcat.web_url().startswith("http://")
+    # 2 s at double speed, 30 frames/s: 31 frames, in the file and in the live viewer.
+    assert len(_track(_animation(out.read_text()), "pelvis", "position")) == 31
+    assert len(_track(_animation(meshcat.StaticHtml()), "pelvis", "position")) == 31
+    # A second replay into the same viewer replaces the first.
+    same = live_view(viewer_params, REFERENCE, t[:201], q[:201], meshcat=meshcat)
+    assert same is meshcat
+    assert len(_track(_animation(meshcat.StaticHtml()), "pelvis", "position")) == 31
+
+
+# ---------------------------------------------------------------------------
+# Headless Chromium
+# ---------------------------------------------------------------------------
+
+
+def _chromium(tmp_path: Path, html: Path, *extra: str, budget_ms: int = 10000):
+    profile = tmp_path / f"profile-{len(list(tmp_path.glob('profile-*')))}"
+    cmd = [str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+           f"--virtual-time-budget={budget_ms}", *extra, html.resolve().as_uri()]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
+
+
+def _screenshot(tmp_path: Path, html: Path, name: str, budget_ms: int = 10000):
+    png = tmp_path / f"{name}.png"
+    proc = _chromium(tmp_path, html, f"--screenshot={png}", "--enable-logging=stderr", "--v=0",
+                     budget_ms=budget_ms)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert png.is_file(), proc.stderr[-2000:]
+    return mpimg.imread(png)[..., :3], proc.stderr
+
+
+def _coloured_fraction(img: np.ndarray) -> float:
+    """Share of pixels that are not grey: Meshcat's background and grid are grey,
+    the body (skin tone) and the seat (blue) are not."""
+    return float(np.mean(img.max(axis=-1) - img.min(axis=-1) > 0.1))
+
+
+def _console(log: str) -> list[str]:
+    return [line for line in log.splitlines() if ":CONSOLE" in line
+            and not any(b in line for b in BENIGN_CONSOLE)]
+
+
+@needs_chromium
+def test_chromium_renders_the_recording(tmp_path, viewer_params, motion):
+    from pydrake.geometry import Meshcat
+
+    t, q = motion
+    html = record_html(viewer_params, REFERENCE, t, q, tmp_path / "run.html")
+    img, log = _screenshot(tmp_path, html, "run")
+    assert img.shape == (600, 800, 3)
+    assert _console(log) == []  # no JavaScript error or warning of the page
+    assert "Uncaught" not in log
+    # The model is drawn: ~15 % of the window is coloured (body and seat).
+    assert _coloured_fraction(img) > 0.02
+    # Control: the same viewer without the model is grey (~0.1 %).
+    blank = tmp_path / "blank.html"
+    blank.write_text(Meshcat().StaticHtml())
+    empty, _ = _screenshot(tmp_path, blank, "blank")
+    assert _coloured_fraction(empty) < 0.005
+    # The DOM after the scripts ran: the viewer's pane holds a WebGL canvas.
+    proc = _chromium(tmp_path, html, "--dump-dom")
+    assert proc.returncode == 0
+    assert 'id="meshcat-pane"' in proc.stdout
+    assert re.search(r'<div id="meshcat-pane"[^>]*>\s*<canvas', proc.stdout)
+
+
+@needs_chromium
+def test_chromium_plays_the_animation(tmp_path, viewer_params):
+    # The trunk leans +-0.45 rad over a 2 s cycle: half a cycle apart, the
+    # screenshots differ; a whole cycle apart, they agree.
+    v = build_viewer(viewer_params)
+    q0 = v.plant.GetPositions(v.plant_context)
+    shape = np.zeros(31, complex)
+    shape[[7, 10, 14]] = 0.15
+    html = mode_animation_html(viewer_params, REFERENCE, q0, shape, 3.0, tmp_path / "m.html",
+                               amplitude=1.0, cycle_time_s=2.0)
+    a, _ = _screenshot(tmp_path, html, "a", budget_ms=3000)
+    b, _ = _screenshot(tmp_path, html, "b", budget_ms=4000)
+    c, _ = _screenshot(tmp_path, html, "c", budget_ms=5000)
+    changed = float(np.mean(np.abs(a - b).max(axis=-1) > 0.1))
+    assert changed > 0.01
+    assert float(np.mean(np.abs(a - c).max(axis=-1) > 0.1)) < changed / 3
