@@ -4,6 +4,8 @@ Commands
 --------
 simulate          settle, vibrate, write time series, transmissibility, plots
 modes             linearize the closed loop: modes, shapes, participation, linear FRF
+fit               identify parameters from measured transmissibility
+sweep             batch runs (parameters, anthropometry, seats, Monte Carlo)
 transmissibility  estimate frf.csv (+ figures) from a simulation or lab folder
 comfort           ISO 2631-1 comfort metrics of a simulation or lab folder
 
@@ -27,6 +29,8 @@ import numpy as np
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import VARIANTS, ParameterError, load_params
 from .signals import KINDS, PAPER_RMS, SignalError
+from .sweep import add_sweep_arguments
+from .viz import add_viz_arguments, handle_viz
 
 
 class UsageError(ValueError):
@@ -130,6 +134,7 @@ def cmd_simulate(args) -> int:
     settle_wall = time.perf_counter() - t0
     settled.save(out / "settled_state.npz")
     result = vibrate(params, settled, signal, measures, args.variant, progress=progress)
+    handle_viz(args, params, measures, result)
     files = [p.name for p in result.write_csv(out)]
     model = build_diagram(params, measures, None, args.variant, guard=False)
     ref = model.plant.GetPositions(model.plant.CreateDefaultContext())
@@ -350,6 +355,73 @@ def cmd_modes(args) -> int:
 
 
 # ---------------------------------------------------------------------------
+# fit
+# ---------------------------------------------------------------------------
+
+
+def cmd_fit(args) -> int:
+    from .analysis.dataio import read_data_dir
+    from .analysis.spectral import transmissibility
+    from .identification.fit import (
+        fit,
+        load_weights,
+        safe_parameters,
+        verify_time_domain,
+        write_outputs,
+    )
+    from .params import save_params
+
+    frf, ts = read_data_dir(args.data)
+    if frf is None:
+        frf = transmissibility(ts)
+    start = _load_model_params(args)
+    measures = _measures(args)
+    weights = load_weights(args.weights)
+    out = prepare_output_dir(args.out, args.force)
+    result = fit(frf, start, args.free, weights, args.holdout, measures, args.variant,
+                 workers=args.workers, progress=not args.quiet)
+    report = result.report
+    files = write_outputs(result, frf, out)
+    if result.interrupted:
+        print(f"interrupted: the best parameters so far are in {out / 'params.yaml'}",
+              file=sys.stderr)
+        return 130
+    if not args.no_verify:
+        params, frac, verification = safe_parameters(
+            result, frf, verify_time_domain, measures=measures, variant=args.variant,
+            duration=args.verify_duration, timeseries=ts, progress=not args.quiet)
+        verification["step_fraction_kept"] = frac
+        report["verification"] = verification
+        if frac < 1.0:
+            report["warnings"].append(
+                f"the fitted parameters failed the time-domain check "
+                f"({verification.get('reason', 'see verification')}); params.yaml holds "
+                f"{'the start' if frac == 0 else f'{frac:g} of the log-step'} instead")
+            save_params(params, out / "params.yaml")
+        (out / "fit_report.json").write_text(json.dumps(report, indent=1))
+    print(f"fit of {len(report['free'])} parameters to {report['data_rows_used']} rows in "
+          f"{report['fit_wall_s']:.1f} s ({report['n_model_evaluations']} model evaluations): "
+          f"cost {report['cost_before']:.4g} -> {report['cost_after']:.4g}, RMS gain error "
+          f"{100 * report['gain_error_before']:.1f}% -> {100 * report['gain_error_after']:.1f}%")
+    if "heldout_error" in report:
+        print(f"held-out ({args.holdout}) RMS gain error {100 * report['heldout_error']:.1f}% "
+              f"(before {100 * report['heldout_error_before']:.1f}%)")
+    for p in report["parameters"]:
+        flag = "" if p["identifiable"] else "  (not determined by the data)"
+        print(f"  {p['name']:26s} {p['start']:10.4g} -> {p['fitted']:10.4g} {p['unit']:9s} "
+              f"+/- {100 * p['rel_std_error']:.1f}%{flag}")
+    if "verification" in report:
+        v = report["verification"]
+        print(f"time-domain verification: {'passed' if v['passed'] else 'FAILED'}; "
+              + ", ".join(f"{d}: {100 * e['rms_log_gain_error']:.1f}% RMS gain error"
+                          for d, e in v["directions"].items() if e.get("rms_log_gain_error")))
+    for w in report["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    print(f"-> {out}: " + ", ".join(files))
+    return 0
+
+
+# ---------------------------------------------------------------------------
 # main
 # ---------------------------------------------------------------------------
 
@@ -380,6 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")
+    add_viz_arguments(p)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("modes", help="linearize the closed loop; modes, shapes, linear FRF")
@@ -392,6 +465,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--force", action="store_true")
     p.set_defaults(func=cmd_modes)
+
+    p = sub.add_parser("fit", help="identify parameters from measured transmissibility")
+    p.add_argument("data", metavar="DATA", help="folder with frf.csv and/or timeseries.csv")
+    _add_model_arguments(p)
+    p.add_argument("--free", metavar="GROUP,...", default="default",
+                   help="free parameters: groups (passive, spine_axial, pid, his, contact, "
+                   "restraints, default) and/or names (see ehm_drake/data/fit_parameters.yaml)")
+    p.add_argument("--weights", metavar="FILE", help="channel weights (YAML/JSON): keys "
+                   "segment, segment_dof or direction/segment/dof")
+    p.add_argument("--holdout", metavar="KEY=VALUE", help="leave data out of the fit and "
+                   "report the error on it: direction=z, segment=knee_l, level=0.3")
+    p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
+    p.add_argument("--no-verify", action="store_true", help="skip the time-domain check")
+    p.add_argument("--verify-duration", type=_positive("--verify-duration"), default=60.0,
+                   metavar="S", help="simulated seconds per direction in the check")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--force", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("transmissibility", help="estimate frf.csv and figures from a "
                        "simulation or lab data folder (H1, 0-12 Hz band-pass)")
@@ -406,6 +498,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "data folder)")
     p.add_argument("--force", action="store_true", help="replace an existing comfort.json")
     p.set_defaults(func=cmd_comfort)
+
+    add_sweep_arguments(sub)
     return parser
 
 

@@ -93,6 +93,7 @@ def build_diagram(
     variant: str = "default",
     log_period: float | None = None,
     guard: bool = True,
+    seat_forces: bool = True,
 ) -> EhmDiagram:
     """Build the closed-loop diagram of the seated human on its seat.
 
@@ -105,6 +106,9 @@ def build_diagram(
     log_period : if given, VectorLogSinks record the channels, seat motion,
         seat forces and torques at this period (s).
     guard : add the `DivergenceGuard` (blow-up detection).
+    seat_forces : add the `SeatForces` measurement (contact results: a
+        second contact solve per evaluation; linearizations that only need
+        the body channels leave it out, as does AutoDiff, which it blocks).
     """
     params = apply_variant(params, variant)
     h = params.simulation.time_step_s
@@ -165,12 +169,14 @@ def build_diagram(
     channels = builder.AddNamedSystem("body_channels", BodyChannels(plant, _marker_list(hp)))
     builder.Connect(state, channels.GetInputPort("state"))
     builder.Connect(disp_out, channels.GetInputPort("seat_displacement"))
-    seat_forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
-    builder.Connect(plant.get_contact_results_output_port(),
-                    seat_forces.GetInputPort("contact_results"))
-    builder.Connect(restraints.GetOutputPort("seat_forces"),
-                    seat_forces.GetInputPort("restraint_forces"))
-    sys.update(body_channels=channels, seat_forces=seat_forces)
+    sys["body_channels"] = channels
+    if seat_forces:
+        forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
+        builder.Connect(plant.get_contact_results_output_port(),
+                        forces.GetInputPort("contact_results"))
+        builder.Connect(restraints.GetOutputPort("seat_forces"),
+                        forces.GetInputPort("restraint_forces"))
+        sys["seat_forces"] = forces
     if guard:
         g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(hp))
         builder.Connect(state, g.GetInputPort("state"))
@@ -178,19 +184,22 @@ def build_diagram(
 
     outputs = {
         "channels": channels.GetOutputPort("channels"),
-        "seat_forces": seat_forces.GetOutputPort("seat_forces"),
         "state": plant.get_state_output_port(),
         "joint_torques": pid.GetOutputPort("torque"),
         "his_torque": his.GetOutputPort("torque"),
         "seat_acceleration": accel_out,
         "seat_displacement": disp_out,
     }
+    if seat_forces:
+        outputs["seat_forces"] = sys["seat_forces"].GetOutputPort("seat_forces")
     for name, port in outputs.items():
         builder.ExportOutput(port, name)
     loggers = {}
     if log_period is not None:
         for name in ("channels", "seat_forces", "joint_torques", "his_torque",
                      "seat_acceleration", "seat_displacement", "state"):
+            if name not in outputs:
+                continue
             port = outputs[name]
             log = builder.AddNamedSystem(f"log_{name}", VectorLogSink(port.size(), log_period))
             builder.Connect(port, log.get_input_port())

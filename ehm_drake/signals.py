@@ -195,6 +195,31 @@ def read_acceleration_csv(path: str | Path, h: float) -> np.ndarray:
     return np.column_stack([np.interp(tt, t - t[0], data[:, k]) for k in (1, 2, 3)])
 
 
+def signal_from_samples(t, acceleration, time_step: float = 1e-3, settle_time: float = 5.0,
+                        onset_time: float = 0.0, description: str = "recorded") -> SeatSignal:
+    """A SeatSignal replaying recorded seat acceleration (t, (N, 3)) after
+    the settle time, resampled to `time_step` by linear interpolation."""
+    t = np.asarray(t, float)
+    a = np.asarray(acceleration, float)
+    if a.ndim != 2 or a.shape[1] != 3 or len(t) != len(a) or len(t) < 10:
+        raise SignalError(f"recorded seat acceleration must be (N>=10, 3) with N times, got "
+                          f"{a.shape} and {t.shape}")
+    h = float(time_step)
+    tt = np.arange(0.0, t[-1] - t[0] + 0.5 * h, h)
+    vib = np.column_stack([np.interp(tt, t - t[0], a[:, k]) for k in range(3)])
+    n_on = int(round(onset_time / h))
+    if n_on:
+        k = np.arange(min(n_on, len(vib)))
+        vib[: len(k)] *= 0.5 * (1.0 - np.cos(np.pi * k / n_on))[:, None]
+    n_settle = int(round(settle_time / h))
+    rms = np.sqrt(np.mean(a**2, axis=0))
+    direction = "".join(ax for ax, r in zip(AXES, rms, strict=True) if r > 0.3 * rms.max())
+    meta = {"kind": "csv", "direction": direction, "rms": float(rms.max()), "seed": None,
+            "duration": float(tt[-1]), "band_hz": list(BAND_HZ)}
+    return SeatSignal(h, n_settle * h, onset_time,
+                      np.vstack([np.zeros((n_settle, 3)), vib]), "csv", description, meta)
+
+
 def make_seat_signal(
     kind: str = "random",
     direction: str = "z",

@@ -26,8 +26,8 @@ Spec file (YAML or JSON)
       rms: [0.2, 0.5]               # common settings may be swept too
       body.mass_kg: [60, 80]        # and body measures
     seat:                           # seat configurations: a grid of contact./restraints.
-      - {name: soft, contact.pelvis_pan.stiffness: 30000, restraints.pelvis_pan.stiffness: 4000}
-      - {name: hard, contact.pelvis_pan.stiffness: 90000}
+      - {name: soft, contact.thighs_pan.stiffness: 20000, restraints.pelvis_pan.stiffness: 4000}
+      - {name: hard, contact.thighs_pan.stiffness: 90000}
     monte_carlo:                    # population: n samples around every grid point
       n: 20
       seed: 1
@@ -210,7 +210,7 @@ class SweepSpec:
         if self.params:
             out["params"] = copy.deepcopy(self.params)
         if self.body_swept:
-            out["body"] = [dict(b) for _, b in self.bodies]
+            out["body"] = [{"name": label, **b} for label, b in self.bodies]
         if self.grid:
             out["grid"] = copy.deepcopy(self.grid)
         if self.seats:
@@ -613,13 +613,16 @@ def _build_spec(data: dict, base_dir: Path, source: str | None) -> SweepSpec:
     overrides: dict[str, Any] = {}
     base = default_params_dict()
     if data.get("params_file") is not None:
+        if not isinstance(data["params_file"], str):
+            raise SweepSpecError(f"params_file: expected a file name, got "
+                                 f"{data['params_file']!r}")
         pf = Path(data["params_file"])
         pf = pf if pf.is_absolute() else base_dir / pf
         try:
             file_params = _read_mapping(pf)
-        except ParameterError as e:
+            base = _deep_merge(base, file_params, "")
+        except (ParameterError, SweepSpecError) as e:
             raise SweepSpecError(f"params_file: {e}") from None
-        base = _deep_merge(base, file_params, "")
         overrides = copy.deepcopy(file_params)
     if data.get("params") is not None:
         if not isinstance(data["params"], Mapping):
@@ -688,7 +691,8 @@ class RunSpec:
 
     run_id: str
     index: int
-    #: The values this run was swept over (key -> value; "body", "seat", "mc_sample").
+    #: The values this run was swept over: "body" (label), grid keys, "seat" (label),
+    #: "mc_sample" (index) and "mc:<path>" (the sampled value).
     swept: dict[str, Any]
     #: The complete parameter set (packaged defaults merged with every override).
     params: dict[str, Any]
@@ -758,12 +762,12 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
         swept: dict[str, Any] = {}
         if spec.body_swept:
             swept["body"] = blabel
-        assigned = list(zip(grid_keys, combo, strict=True)) + list(svalues.items())
+        for key, value in zip(grid_keys, combo, strict=True):
+            swept[key] = value
+            _assign(key, value, params, body, settings)
         if slabel is not None:
             swept["seat"] = slabel
-        for key, value in assigned:
-            if key in grid_keys:
-                swept[key] = value
+        for key, value in svalues.items():
             _assign(key, value, params, body, settings)
         if sample is not None:
             assert mc is not None
@@ -773,7 +777,7 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
                 current = _lookup(key, params, body, settings)
                 value = _draw(rng, current, mc.vary[key])
                 _assign(key, value, params, body, settings)
-                swept[key] = value
+                swept[f"mc:{key}"] = value
         runs.append((swept, params, body, settings))
     out = []
     for i, (swept, params, body, settings) in enumerate(runs):
@@ -1021,7 +1025,7 @@ class _Progress:
         if not self.enabled:
             return
         state = (self.done, self.failed)
-        if not (self._tty or final or state != self._last):
+        if not (self._tty or state != self._last):
             return
         self._last = state
         finished = self.reused + self.done
@@ -1213,8 +1217,15 @@ def _drive(executor, client, todo: list[RunSpec], store, prog: _Progress,
             # executor's queue, so Ctrl-C leaves only the running runs to finish.
             limit = _workers_of(executor, client, max_workers)
             while queue and len(running) < limit:
-                run = queue.pop()
-                running[executor.submit(execute_run, run.inputs())] = run
+                try:
+                    fut = executor.submit(execute_run, queue[-1].inputs())
+                except (cf.BrokenExecutor, RuntimeError) as e:  # pool died / shut down
+                    sys.stderr.write(f"\nsweep: the executor cannot run more ({type(e).__name__}"
+                                     f": {e}); {len(queue)} run(s) not started; run the "
+                                     "sweep again to resume\n")
+                    queue.clear()
+                    break
+                running[fut] = queue.pop()
             done, _ = cf.wait(list(running), timeout=1.0, return_when=cf.FIRST_COMPLETED)
             collect(done)
             prog.show()
@@ -1385,7 +1396,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     result = run_sweep(spec, out, scheduler=args.scheduler, max_workers=args.workers,
                        progress=not args.quiet, force=args.force,
                        retry_failed=args.retry_failed)
-    print(f"sweep {spec.name}: {len(result.runs)} runs, {result.n_done} done, "
+    print(f"sweep '{spec.name}': {len(result.runs)} runs, {result.n_done} done, "
           f"{result.n_failed} failed, {result.n_pending} not run; {len(result.computed)} "
           f"computed, {len(result.reused)} reused, {result.wall_s:.0f} s -> "
           f"{out / 'summary.csv'}")

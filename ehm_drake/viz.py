@@ -223,8 +223,9 @@ def live_view(params: ModelParams, measures: BodyMeasures, times: Any, positions
     """Play the motion q(t) in a live Meshcat and return the Meshcat handle.
 
     `meshcat` defaults to a new ``pydrake.geometry.StartMeshcat()``; its URL is
-    ``handle.web_url()``.  The animation plays once and can be replayed from the
-    viewer's "Animation" controls.  Keep the handle: the server stops with it.
+    ``handle.web_url()``.  A given `meshcat` is cleared first.  The animation plays once
+    and can be replayed from the viewer's "Animation" controls.  Keep the handle: the
+    server stops with it.
     """
     from pydrake.geometry import StartMeshcat
 

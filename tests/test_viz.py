@@ -210,14 +210,14 @@ def test_handle_viz_and_live_view(tmp_path, viewer_params, motion, monkeypatch):
 # ---------------------------------------------------------------------------
 
 
-def _chromium(tmp_path: Path, html: Path, *extra: str, budget_ms: int = 10000):
+def _chromium(tmp_path: Path, html: Path, *extra: str, budget_ms: int = 4000):
     profile = tmp_path / f"profile-{len(list(tmp_path.glob('profile-*')))}"
     cmd = [str(CHROMIUM), *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
            f"--virtual-time-budget={budget_ms}", *extra, html.resolve().as_uri()]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=180, check=False)
 
 
-def _screenshot(tmp_path: Path, html: Path, name: str, budget_ms: int = 10000):
+def _screenshot(tmp_path: Path, html: Path, name: str, budget_ms: int = 4000):
     png = tmp_path / f"{name}.png"
     proc = _chromium(tmp_path, html, f"--screenshot={png}", "--enable-logging=stderr", "--v=0",
                      budget_ms=budget_ms)
@@ -263,17 +263,18 @@ def test_chromium_renders_the_recording(tmp_path, viewer_params, motion):
 
 @needs_chromium
 def test_chromium_plays_the_animation(tmp_path, viewer_params):
-    # The trunk leans +-0.45 rad over a 2 s cycle: half a cycle apart, the
-    # screenshots differ; a whole cycle apart, they agree.
+    # The trunk leans steadily from 0.6 rad back to 0.6 rad forward over 10 s.
+    # The animation's start in Chromium's virtual time varies by ~2 s on a
+    # loaded machine, so the motion is monotonic (no two times share a pose)
+    # rather than periodic.  A still scene renders identically at any time.
     v = build_viewer(viewer_params)
     q0 = v.plant.GetPositions(v.plant_context)
-    shape = np.zeros(31, complex)
-    shape[[7, 10, 14]] = 0.15
-    html = mode_animation_html(viewer_params, REFERENCE, q0, shape, 3.0, tmp_path / "m.html",
-                               amplitude=1.0, cycle_time_s=2.0)
-    a, _ = _screenshot(tmp_path, html, "a", budget_ms=3000)
-    b, _ = _screenshot(tmp_path, html, "b", budget_ms=4000)
-    c, _ = _screenshot(tmp_path, html, "c", budget_ms=5000)
-    changed = float(np.mean(np.abs(a - b).max(axis=-1) > 0.1))
-    assert changed > 0.01
-    assert float(np.mean(np.abs(a - c).max(axis=-1) > 0.1)) < changed / 3
+    t = np.linspace(0.0, 10.0, 101)
+    q = np.tile(q0, (t.size, 1))
+    q[:, [7, 10, 14]] += np.linspace(-0.2, 0.2, t.size)[:, None]
+    html = record_html(viewer_params, REFERENCE, t, q, tmp_path / "lean.html", fps=10)
+    early, _ = _screenshot(tmp_path, html, "early", budget_ms=1000)
+    late, _ = _screenshot(tmp_path, html, "late", budget_ms=6000)
+    assert _coloured_fraction(early) > 0.02 and _coloured_fraction(late) > 0.02
+    changed = float(np.mean(np.abs(early - late).max(axis=-1) > 0.1))
+    assert changed > 0.01  # ~0.6 rad of trunk lean apart: measured 2.0 %

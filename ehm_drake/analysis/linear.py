@@ -39,6 +39,7 @@ from .dataio import FrfData
 INPUT_NAMES = ("seat_ax", "seat_ay", "seat_az")
 OUTPUT_PORTS = ("channels", "seat_forces", "joint_torques", "his_torque")
 FD_STEP = 1e-4
+INPUT_FD_STEP = 1.0
 ROTATIONAL = ("roll", "pitch", "yaw")
 #: A rotation of 1 rad counts like a translation of this length when mode
 #: shapes compare translations (m) and rotations (rad): a trunk-sized lever.
@@ -167,19 +168,8 @@ class LinearModel:
         """Seat-to-body transmissibility in the measured-data format: gain
         m/m (translations, absolute motion) or deg/m (rotations)."""
         f = default_frequencies() if freqs_hz is None else np.asarray(freqs_hz, float)
-        T = self.transmissibility_array(f, directions)  # (nf, nc, nd)
-        nf, nc, nd = T.shape
-        seg = np.array([_split(n)[0] for n in CHANNEL_NAMES])
-        dof = np.array([_split(n)[1] for n in CHANNEL_NAMES])
-        # Rows ordered direction, channel, frequency.
-        Tt = T.transpose(2, 1, 0).reshape(-1)
-        return FrfData(
-            direction=np.repeat(np.array(list(directions)), nc * nf),
-            segment=np.tile(np.repeat(seg, nf), nd),
-            dof=np.tile(np.repeat(dof, nf), nd),
-            freq_hz=np.tile(f, nc * nd),
-            gain=np.abs(Tt), phase_deg=np.degrees(np.angle(Tt)),
-            coherence=np.full(Tt.size, coherence))
+        return frf_from_array(self.transmissibility_array(f, directions), f, directions,
+                              coherence)
 
     def apparent_mass(self, freqs_hz=None, directions="xz"):
         """Normalized apparent mass of the pan: {direction: (f, modulus, phase_deg)}."""
@@ -307,6 +297,23 @@ class LinearModel:
 _ROT_MASK = np.array([n.rsplit("_", 1)[-1] in ROTATIONAL for n in CHANNEL_NAMES])
 
 
+def frf_from_array(T: np.ndarray, freqs, directions: str, coherence: float = 1.0) -> FrfData:
+    """FrfData rows (direction, channel, frequency order) from a complex
+    transmissibility array (nf, 30 channels, len(directions))."""
+    f = np.asarray(freqs, float)
+    nf, nc, nd = T.shape
+    seg = np.array([_split(n)[0] for n in CHANNEL_NAMES])
+    dof = np.array([_split(n)[1] for n in CHANNEL_NAMES])
+    Tt = T.transpose(2, 1, 0).reshape(-1)
+    return FrfData(
+        direction=np.repeat(np.array(list(directions)), nc * nf),
+        segment=np.tile(np.repeat(seg, nf), nd),
+        dof=np.tile(np.repeat(dof, nf), nd),
+        freq_hz=np.tile(f, nc * nd),
+        gain=np.abs(Tt), phase_deg=np.degrees(np.angle(Tt)),
+        coherence=np.full(Tt.size, coherence))
+
+
 def default_frequencies(n: int = 240, f_max: float = 12.0) -> np.ndarray:
     """240 frequencies from 0.05 to 12 Hz (the analysis band)."""
     return np.linspace(f_max / n, f_max, n)
@@ -394,7 +401,7 @@ def _output_names(model: EhmDiagram, ports) -> list[str]:
 
 
 def linearize(model: EhmDiagram, root_context=None, method: str = "auto",
-              fd_step: float = FD_STEP) -> LinearModel:
+              fd_step: float = FD_STEP, outputs=None, central: bool = True) -> LinearModel:
     """Linearize the seated-human `model` (built without a signal) about the
     static equilibrium in `root_context` (computed when None)."""
     from ..simulation import StateMap, static_equilibrium
@@ -406,15 +413,15 @@ def linearize(model: EhmDiagram, root_context=None, method: str = "auto",
     else:
         smap = StateMap(model)
     model.diagram.GetInputPort("seat_displacement").FixValue(root_context, np.zeros(3))
-    ports = [p for p in OUTPUT_PORTS if model.diagram.HasOutputPort(p)]
+    ports = [p for p in (outputs or OUTPUT_PORTS) if model.diagram.HasOutputPort(p)]
     return linearize_system(model.diagram, root_context, ports,
                             model.params.simulation.time_step_s, method, fd_step,
-                            _state_names(model, smap), _output_names(model, ports))
+                            _state_names(model, smap), _output_names(model, ports), central)
 
 
 def linearize_system(diagram, root_context, output_ports, h: float, method: str = "auto",
-                     fd_step: float = FD_STEP, state_names=None,
-                     output_names=None) -> LinearModel:
+                     fd_step: float = FD_STEP, state_names=None, output_names=None,
+                     central: bool = True) -> LinearModel:
     """Linearize any discrete Diagram (single period h) about the state in
     `root_context`, from its input port ``seat_acceleration`` (3) to the
     named output ports.  Other input ports must be fixed in the context."""
@@ -438,7 +445,7 @@ def linearize_system(diagram, root_context, output_ports, h: float, method: str 
             if method == "autodiff":
                 raise LinearizationError(f"AutoDiff linearization not possible: {e}") from None
     if used is None:
-        A, B, C, D = _linearize_fd(diagram, root_context, smap, output_ports, fd_step)
+        A, B, C, D = _linearize_fd(diagram, root_context, smap, output_ports, fd_step, central)
         used = "fd"
         smap.set(root_context, x0)
         a_port.FixValue(root_context, np.zeros(3))
@@ -457,7 +464,8 @@ def linearize_system(diagram, root_context, output_ports, h: float, method: str 
     return LinearModel(A, B, C, D, h, names, out_names, x0, y0, state_groups, out_groups, used)
 
 
-def _linearize_fd(diagram, ctx, smap, ports, eps):
+def _linearize_fd(diagram, ctx, smap, ports, eps, central=True):
+    """Central (or forward: half the cost, O(eps) error) differences."""
     a_port = diagram.GetInputPort("seat_acceleration")
     x0 = smap.get(ctx)
     n = len(x0)
@@ -469,13 +477,24 @@ def _linearize_fd(diagram, ctx, smap, ports, eps):
 
     u0 = np.zeros(3)
     cols_x, cols_y = [], []
+    if not central:
+        xc, yc = evaluate(x0, u0)
+    # The seat input is perturbed by 1 m/s^2: its effect on one step (h * 1
+    # m/s) must stand well above SAP's solution tolerance (~1e-8 m/s), and
+    # the model is linear in it (inertial load) anyway.
+    steps = np.r_[np.full(n, eps), np.full(3, INPUT_FD_STEP)]
     for j in range(n + 3):
         ep = np.zeros(n + 3)
-        ep[j] = eps
+        ep[j] = steps[j]
+        eps = steps[j]
         xp, yp = evaluate(x0 + ep[:n], u0 + ep[n:])
-        xm, ym = evaluate(x0 - ep[:n], u0 - ep[n:])
-        cols_x.append((xp - xm) / (2 * eps))
-        cols_y.append((yp - ym) / (2 * eps))
+        if central:
+            xm, ym = evaluate(x0 - ep[:n], u0 - ep[n:])
+            cols_x.append((xp - xm) / (2 * eps))
+            cols_y.append((yp - ym) / (2 * eps))
+        else:
+            cols_x.append((xp - xc) / eps)
+            cols_y.append((yp - yc) / eps)
     J = np.array(cols_x).T
     K = np.array(cols_y).T
     return J[:, :n], J[:, n:], K[:, :n], K[:, n:]

@@ -1,0 +1,644 @@
+"""Fit the model to measured transmissibility (paper Sec. III-A, Fig. 4).
+
+Cost
+----
+For every measured row (direction, segment, dof, frequency) with coherence
+above `min_coherence`:
+
+* the log-gain error ln|T_model| - ln(gain), and, where the coherence is
+  above `phase_min_coherence`, the wrapped phase error (rad) times
+  `phase_weight`;
+* weighted by the row's coherence as the inverse variance of an H1 gain,
+  gamma^2 / (1 - gamma^2) (gamma^2 capped at 0.99 so noise-free simulated
+  data stays finite), by the channel's weight (default: head and trunk 1,
+  pelvis 0.5, knees 0.3, as the paper prioritised head and trunk), and by
+  1/(rows of the channel) so that every channel counts once.
+
+The model side is the linear frequency response of the closed loop
+(`ehm_drake.analysis.linear`), linearized by finite differences about the
+static equilibrium of the starting parameters (the equilibrium moves by
+millimetres as contact stiffnesses change, a second-order effect on the
+FRF; the final parameters are re-linearized at their own equilibrium and
+verified in the nonlinear time domain).  The optimizer is scipy's bounded
+trust-region least squares on log(scale) of each free parameter, with the
+finite-difference Jacobian evaluated in parallel worker processes.
+
+Identifiability
+---------------
+From the Jacobian J (in log-scale) at the solution: covariance
+s^2 (J^T J)^+ with s^2 the residual variance.  A parameter is reported as
+determined by the data when its relative standard error is at most
+`ident_threshold` (default 3.3%: within 10% at three standard errors), it
+is not on a bound, and it correlates with no other free parameter at
+|rho| > 0.95; otherwise it is listed, with the reason, under
+`not_identifiable`.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy.optimize import least_squares
+
+from ..analysis.dataio import FrfData
+from ..model.anthropometry import REFERENCE, BodyMeasures
+from ..params import ModelParams, ParameterError, params_from_dict, save_params
+from ..systems.outputs import CHANNEL_NAMES
+from .parameters import (
+    FreeParameter,
+    apply_scales,
+    representative,
+    resolve_free,
+    scale_bounds,
+)
+
+#: Default channel weights: head and trunk prioritised over the pelvis
+#: (Desai et al. IV), knees least.
+DEFAULT_SEGMENT_WEIGHTS = {"head": 1.0, "trunk": 1.0, "pelvis": 0.5, "knee_l": 0.3, "knee_r": 0.3}
+COHERENCE_CAP = 0.99
+UNSTABLE_PENALTY = 30.0
+
+
+class FitError(RuntimeError):
+    """The fit cannot proceed (bad data for fitting, no usable rows, ...)."""
+
+
+# ---------------------------------------------------------------------------
+# Channel weights
+# ---------------------------------------------------------------------------
+
+
+def load_weights(path: str | Path | None) -> dict[str, float]:
+    """Channel weights: keys `segment`, `segment_dof` or `direction/segment/dof`
+    (the most specific wins), values >= 0."""
+    if path is None:
+        return {}
+    path = Path(path)
+    if not path.is_file():
+        raise ParameterError(f"--weights file not found: {path}")
+    text = path.read_text()
+    data = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    if not isinstance(data, dict):
+        raise ParameterError(f"{path}: expected a mapping channel -> weight")
+    out = {}
+    for k, v in data.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+            raise ParameterError(f"{path}: weight of {k!r} must be a non-negative number, got {v!r}")
+        parts = str(k).replace("/", " ").replace("_", " ").split()
+        if not parts:
+            raise ParameterError(f"{path}: empty key")
+        out[str(k)] = float(v)
+    return out
+
+
+def channel_weight(weights: dict[str, float], direction: str, segment: str, dof: str) -> float:
+    for key in (f"{direction}/{segment}/{dof}", f"{segment}_{dof}", segment):
+        if key in weights:
+            return weights[key]
+    return DEFAULT_SEGMENT_WEIGHTS.get(segment, 1.0)
+
+
+# ---------------------------------------------------------------------------
+# Residuals
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class Residuals:
+    """Maps a model transmissibility array to the weighted residual vector
+    for a fixed set of measured rows (picklable)."""
+
+    freqs: np.ndarray  # unique frequencies the model is evaluated at
+    directions: str
+    row_f: np.ndarray  # index into freqs per row
+    row_c: np.ndarray  # channel index (0..29) per row
+    row_d: np.ndarray  # direction index per row
+    log_gain: np.ndarray
+    phase: np.ndarray  # rad
+    w_gain: np.ndarray
+    w_phase: np.ndarray
+    keys: list  # (direction, segment, dof, level) per row
+    rows_per_key: dict = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, frf: FrfData, weights: dict[str, float], phase_weight: float = 0.5,
+              min_coherence: float = 0.3, phase_min_coherence: float = 0.8) -> Residuals:
+        keep = frf.coherence >= min_coherence
+        if not np.any(keep):
+            raise FitError(f"no data row has coherence >= {min_coherence}; nothing to fit")
+        direction = frf.direction[keep]
+        segment = frf.segment[keep]
+        dof = frf.dof[keep]
+        f = frf.freq_hz[keep]
+        gain = frf.gain[keep]
+        coh = frf.coherence[keep]
+        level = frf.level_rms[keep]
+        if np.any(gain <= 0):
+            i = int(np.argmax(gain <= 0))
+            raise FitError(f"zero gain in {direction[i]}/{segment[i]}/{dof[i]} at {f[i]:g} Hz: "
+                           "its log error is undefined; drop the row or its channel")
+        directions = "".join(d for d in "xyz" if d in set(direction))
+        freqs = np.unique(f)
+        c = np.array([CHANNEL_NAMES.index(f"{s}_{d}") for s, d in zip(segment, dof, strict=True)])
+        g2 = np.minimum(coh, COHERENCE_CAP) ** 2
+        w_coh = g2 / (1.0 - g2)
+        keys = [(d, s, o, float(lv)) for d, s, o, lv in zip(direction, segment, dof, level,
+                                                             strict=True)]
+        counts: dict = {}
+        for k in keys:
+            counts[k] = counts.get(k, 0) + 1
+        w_ch = np.array([channel_weight(weights, k[0], k[1], k[2]) for k in keys])
+        n_rows = np.array([counts[k] for k in keys], float)
+        base = w_ch * w_coh / n_rows
+        base = base / base.sum()
+        w_gain = np.sqrt(base)
+        w_phase = np.where(coh >= phase_min_coherence, np.sqrt(base) * phase_weight, 0.0)
+        return cls(freqs, directions, np.searchsorted(freqs, f), c,
+                   np.array([directions.index(d) for d in direction]), np.log(gain),
+                   np.radians(frf.phase_deg[keep]), w_gain, w_phase, keys, counts)
+
+    @property
+    def size(self) -> int:
+        return 2 * len(self.row_f)
+
+    def model_values(self, T: np.ndarray) -> np.ndarray:
+        return T[self.row_f, self.row_c, self.row_d]
+
+    def __call__(self, T: np.ndarray) -> np.ndarray:
+        t = self.model_values(T)
+        e_gain = np.log(np.abs(t)) - self.log_gain
+        e_phase = np.angle(t * np.exp(-1j * self.phase))
+        return np.concatenate([self.w_gain * e_gain, self.w_phase * e_phase])
+
+    def channel_errors(self, T: np.ndarray) -> dict[str, float]:
+        """RMS log-gain error per channel, as a fraction (0.1 = ~10%)."""
+        t = self.model_values(T)
+        e = np.log(np.abs(t)) - self.log_gain
+        out: dict[str, list[float]] = {}
+        for k, ei in zip(self.keys, e, strict=True):
+            name = f"{k[0]}/{k[1]}/{k[2]}" + ("" if math.isnan(k[3]) else f"@{k[3]:g}")
+            out.setdefault(name, []).append(ei)
+        return {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in out.items()}
+
+    def gain_error(self, T: np.ndarray) -> float:
+        """Weighted RMS log-gain error (fraction) over all rows."""
+        t = self.model_values(T)
+        e = np.log(np.abs(t)) - self.log_gain
+        w = self.w_gain**2
+        return float(np.sqrt(np.sum(w * e * e) / np.sum(w)))
+
+
+# ---------------------------------------------------------------------------
+# Model evaluation (runs in worker processes too)
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class Evaluator:
+    """Builds the model for a scale vector and returns its linear
+    transmissibility (nf, 30, ndir); picklable (plain inputs only)."""
+
+    base: dict  # ModelParams as a dict
+    measures: tuple  # (mass, stature, sitting height)
+    variant: str
+    free_names: list[str]
+    freqs: np.ndarray
+    directions: str
+    x_ref: np.ndarray | None = None
+    _free: list = field(default=None, repr=False)
+    _base: ModelParams = field(default=None, repr=False)
+
+    def setup(self) -> Evaluator:
+        from .parameters import load_registry
+
+        registry, _ = load_registry()
+        self._free = [registry[n] for n in self.free_names]
+        self._base = params_from_dict(self.base)
+        if self.x_ref is None:
+            self.x_ref = self.equilibrium(np.zeros(len(self._free)))
+        return self
+
+    def body(self) -> BodyMeasures:
+        return BodyMeasures(*self.measures)
+
+    def equilibrium(self, log_scales) -> np.ndarray:
+        """Static equilibrium state of the model with these scales."""
+        from ..diagram import build_diagram
+        from ..simulation import static_equilibrium
+
+        model = build_diagram(self.params(log_scales), self.body(), None, self.variant,
+                              guard=False, seat_forces=False)
+        ctx, smap = static_equilibrium(model)
+        return smap.get(ctx)
+
+    def params(self, log_scales) -> ModelParams:
+        return apply_scales(self._base, self._free, np.exp(log_scales))
+
+    def linear_model(self, log_scales, at_equilibrium: bool = False):
+        from ..analysis.linear import linearize
+        from ..diagram import build_diagram
+        from ..simulation import StateMap
+
+        params = self.params(log_scales)
+        model = build_diagram(params, self.body(), None, self.variant, guard=False,
+                              seat_forces=False)
+        if at_equilibrium:
+            return linearize(model, None, method="fd", outputs=["channels"])
+        ctx = model.diagram.CreateDefaultContext()
+        StateMap(model).set(ctx, self.x_ref)
+        return linearize(model, ctx, method="fd", outputs=["channels"])
+
+    def transmissibility(self, log_scales, at_equilibrium: bool = False):
+        """(T, stable)."""
+        lm = self.linear_model(log_scales, at_equilibrium)
+        return lm.transmissibility_array(self.freqs, self.directions), lm.is_stable
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(evaluator: Evaluator, residuals: Residuals) -> None:
+    _WORKER["ev"] = evaluator.setup()
+    _WORKER["res"] = residuals
+
+
+def _worker_residual(task) -> np.ndarray:
+    log_scales, x_ref = task
+    _WORKER["ev"].x_ref = x_ref
+    return _residual(_WORKER["ev"], _WORKER["res"], log_scales)
+
+
+def _residual(ev: Evaluator, res: Residuals, log_scales) -> np.ndarray:
+    T, stable = ev.transmissibility(log_scales)
+    r = res(T)
+    if not stable:  # keep the optimizer in the stable region
+        r = r + UNSTABLE_PENALTY * np.sign(r + 1e-300) * np.abs(res.w_gain).max()
+    return r
+
+
+# ---------------------------------------------------------------------------
+# The fit
+# ---------------------------------------------------------------------------
+
+
+@dataclass
+class FitResult:
+    params: ModelParams
+    start: ModelParams
+    free: list[FreeParameter]
+    scales: np.ndarray
+    report: dict
+    T_start: np.ndarray
+    T_fit: np.ndarray
+    freqs: np.ndarray
+    directions: str
+    interrupted: bool = False
+
+
+def split_holdout(frf: FrfData, holdout: str | None) -> tuple[FrfData, FrfData | None]:
+    """`direction=z`, `segment=knee_l`, `level=0.3` (several joined by ';')."""
+    if not holdout:
+        return frf, None
+    mask = np.zeros(len(frf), bool)
+    for item in holdout.split(";"):
+        if "=" not in item:
+            raise FitError(f"--holdout {holdout!r}: expected KEY=VALUE with KEY direction, "
+                           "segment, dof or level")
+        key, value = (s.strip() for s in item.split("=", 1))
+        if key == "direction":
+            m = frf.direction == value
+        elif key == "segment":
+            m = frf.segment == value
+        elif key == "dof":
+            m = frf.dof == value
+        elif key == "level":
+            try:
+                v = float(value)
+            except ValueError:
+                raise FitError(f"--holdout level={value!r}: not a number") from None
+            m = np.isclose(frf.level_rms, v, rtol=1e-6)
+        else:
+            raise FitError(f"--holdout: unknown key {key!r} (direction, segment, dof, level)")
+        if not m.any():
+            raise FitError(f"--holdout {item!r} matches no data row")
+        mask |= m
+    if mask.all():
+        raise FitError(f"--holdout {holdout!r} leaves no data to fit")
+    return frf._take(np.flatnonzero(~mask)), frf._take(np.flatnonzero(mask))
+
+
+def check_fit_data(frf: FrfData) -> list[str]:
+    """Errors for data that cannot be fitted, warnings for what looks odd."""
+    from ..analysis.dataio import check_units
+
+    warnings = []
+    segs = set(frf.segment)
+    if not ({"head", "trunk"} & segs):
+        warnings.append("no head or trunk channel in the data: the fit has little to go on "
+                        "(the paper fitted head and trunk first)")
+    unit_warnings = check_units(frf)
+    for w in unit_warnings:
+        if "1000" in w or "mm" in w or "rad" in w:
+            raise FitError(f"suspect units: {w}")
+    return warnings + unit_warnings
+
+
+class _Tracker:
+    def __init__(self, progress: bool, cost0: float | None = None):
+        self.best_cost = math.inf
+        self.best_x = None
+        self.n = 0
+        self.t0 = time.perf_counter()
+        self.progress = progress
+        self.cost0 = cost0
+
+    def record(self, x, r) -> None:
+        self.n += 1
+        cost = 0.5 * float(r @ r)
+        if cost < self.best_cost:
+            self.best_cost, self.best_x = cost, np.array(x)
+        if self.progress:
+            start = f" (start {self.cost0:.4g})" if self.cost0 is not None else ""
+            sys.stderr.write(f"\rfit: evaluation {self.n}, cost {cost:.4g}, best "
+                             f"{self.best_cost:.4g}{start}, {time.perf_counter() - self.t0:.0f} s ")
+            sys.stderr.flush()
+
+
+def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None = None,
+        weights: dict | None = None, holdout: str | None = None,
+        measures: BodyMeasures = REFERENCE, variant: str = "default", workers: int = 2,
+        progress: bool = True, max_evaluations: int = 400, ident_threshold: float = 0.033,
+        phase_weight: float = 0.5, stages: int | str = "auto") -> FitResult:
+    """Identify the free parameters from measured transmissibility `frf`."""
+    from ..params import load_params
+
+    start = start or load_params()
+    free_params = resolve_free(free) if not isinstance(free, list) else free
+    warnings = check_fit_data(frf)
+    train, held = split_holdout(frf, holdout)
+    res = Residuals.build(train, weights or {}, phase_weight)
+    held_res = Residuals.build(held, weights or {}, phase_weight) if held is not None else None
+    freqs = np.unique(np.concatenate([res.freqs] + ([held_res.freqs] if held_res else [])))
+    directions = "".join(d for d in "xyz" if d in set(frf.direction))
+    # Residual layouts indexed into the common frequency grid and directions.
+    for r in filter(None, (res, held_res)):
+        r.row_f = np.searchsorted(freqs, r.freqs[r.row_f])
+        r.row_d = np.array([directions.index(k[0]) for k in r.keys])
+        r.freqs = freqs
+        r.directions = directions
+    bounds = np.array([scale_bounds(start, fp) for fp in free_params])
+    lo, hi = np.log(bounds[:, 0]), np.log(bounds[:, 1])
+    ev = Evaluator(start.to_dict(), (measures.mass_kg, measures.stature_m,
+                                     measures.resolved_sitting_height()),
+                   variant, [fp.name for fp in free_params], freqs, directions).setup()
+    x0 = np.zeros(len(free_params))
+    T0, stable0 = ev.transmissibility(x0)
+    r0 = res(T0)
+    tracker = _Tracker(progress, 0.5 * float(r0 @ r0))
+    tracker.record(x0, r0)
+    pool = (cf.ProcessPoolExecutor(workers, initializer=_init_worker, initargs=(ev, res))
+            if workers > 1 else None)
+    cache: dict = {}
+
+    def fun(x):
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = _residual(ev, res, x)
+            tracker.record(x, cache[key])
+        return cache[key]
+
+    # A 3% parameter step: its effect on the FRF stands well above the ~1e-4
+    # numerical noise of the finite-difference linearization (with 0.1% steps
+    # the weakest columns were noise and their standard errors too small).
+    step = 0.03
+
+    def jac(x):
+        f0 = fun(x)
+        xs = [x + step * np.eye(len(x))[j] * (1 if x[j] + step <= hi[j] else -1)
+              for j in range(len(x))]
+        if pool is not None:
+            cols = list(pool.map(_worker_residual, [(xj, ev.x_ref) for xj in xs]))
+        else:
+            cols = [_residual(ev, res, xj) for xj in xs]
+        tracker.n += len(xs)
+        return np.column_stack([(c - f0) / (xj - x).sum() for c, xj in zip(cols, xs,
+                                                                           strict=True)])
+
+    t_start = time.perf_counter()
+    interrupted = False
+    x_best, J = x0, None
+    try:
+        # Stage 1 linearizes about the starting parameters' equilibrium;
+        # stage 2 about the stage-1 parameters' own equilibrium (contact
+        # stiffness moves it by millimetres), removing that bias.
+        n_stages = 2 if stages == "auto" else int(stages)
+        for stage in range(n_stages):
+            if stage > 0:
+                x_eq = ev.equilibrium(x_best)
+                if stages == "auto" and np.max(np.abs(x_eq - ev.x_ref)) < 2e-4:
+                    break  # the equilibrium barely moved: no bias to remove
+                ev.x_ref = x_eq
+                cache.clear()
+                tracker.best_cost, tracker.best_x = 0.5 * float(fun(x_best) @ fun(x_best)), x_best
+            sol = least_squares(fun, x_best, jac=jac, bounds=(lo, hi), method="trf",
+                                x_scale=1.0, ftol=1e-3, xtol=1e-3, gtol=1e-8,
+                                max_nfev=max(10, max_evaluations // (len(x0) + 1)))
+            x_best = sol.x if 0.5 * float(sol.fun @ sol.fun) <= tracker.best_cost \
+                else tracker.best_x
+            J = sol.jac
+    except KeyboardInterrupt:
+        interrupted = True
+        x_best = tracker.best_x
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    t_fit = time.perf_counter() - t_start
+    if progress:
+        sys.stderr.write("\n")
+    if J is None:
+        J = np.full((res.size, len(x0)), np.nan)
+    # Final model at its own equilibrium.
+    T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
+    r_fit = res(T_fit)
+    report = _report(free_params, start, ev, x_best, bounds, J, r_fit, r0, res, T0, T_fit,
+                     held_res, stable, stable0, ident_threshold)
+    report.update({"warnings": warnings, "holdout": holdout, "interrupted": interrupted,
+                   "fit_wall_s": t_fit, "n_model_evaluations": tracker.n,
+                   "free": [fp.name for fp in free_params], "variant": variant,
+                   "data_rows_used": len(res.row_f)})
+    return FitResult(ev.params(x_best), start, free_params, np.exp(x_best), report, T0, T_fit,
+                     freqs, directions, interrupted)
+
+
+def _report(free, start, ev, x, bounds, J, r_fit, r0, res, T0, T_fit, held_res, stable,
+            stable0, threshold) -> dict:
+    m, n = J.shape
+    cost_before = 0.5 * float(r0 @ r0)
+    cost_after = 0.5 * float(r_fit @ r_fit)
+    dof = max(m - n, 1)
+    s2 = 2 * cost_after / dof
+    # Covariance of log-scales: s^2 (J^T J)^+ (pseudo-inverse: singular
+    # directions are the undetermined combinations).
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
+    tol = sv.max() * 1e-9 if sv.size and np.isfinite(sv).all() else 0.0
+    inv = np.where(sv > tol, 1.0 / np.maximum(sv, 1e-300) ** 2, np.inf)
+    cov = (Vt.T * inv) @ Vt if np.all(np.isfinite(inv)) else (Vt.T * np.where(
+        np.isfinite(inv), inv, 1e12)) @ Vt
+    cov = s2 * cov
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = cov / np.outer(np.maximum(se, 1e-300), np.maximum(se, 1e-300))
+    fitted = ev.params(x)
+    params_out = []
+    undetermined = []
+    for i, fp in enumerate(free):
+        at_bound = bool(x[i] <= np.log(bounds[i, 0]) + 1e-6 or x[i] >= np.log(bounds[i, 1]) - 1e-6)
+        partners = [free[j].name for j in range(n) if j != i and abs(corr[i, j]) > 0.95]
+        rel = float(min(se[i], 1e6))
+        ok = rel <= threshold and not at_bound and not partners
+        value = representative(fitted, fp)
+        params_out.append({
+            "name": fp.name, "unit": fp.unit, "start": representative(start, fp),
+            "fitted": value, "scale": float(np.exp(x[i])),
+            "std_error": rel * value, "rel_std_error": rel, "at_bound": at_bound,
+            "correlated_with": partners, "identifiable": bool(ok)})
+        if not ok:
+            why = []
+            if rel > threshold:
+                why.append(f"relative standard error {rel:.2g} > {threshold}")
+            if at_bound:
+                why.append("at a physiological bound")
+            if partners:
+                why.append("correlated (|rho| > 0.95) with " + ", ".join(partners))
+            undetermined.append({"name": fp.name, "reason": "; ".join(why)})
+    out = {
+        "cost_before": cost_before,
+        "cost_after": cost_after,
+        "gain_error_before": res.gain_error(T0),
+        "gain_error_after": res.gain_error(T_fit),
+        "error_per_channel": {k: {"before": v, "after": res.channel_errors(T_fit)[k]}
+                              for k, v in res.channel_errors(T0).items()},
+        "parameters": params_out,
+        "correlation": {"names": [fp.name for fp in free],
+                        "matrix": np.round(np.nan_to_num(corr), 4).tolist()},
+        "not_identifiable": undetermined,
+        "stable_before": bool(stable0),
+        "stable_after": bool(stable),
+    }
+    if held_res is not None:
+        out["heldout_error"] = held_res.gain_error(T_fit)
+        out["heldout_error_before"] = held_res.gain_error(T0)
+        out["heldout_cost"] = 0.5 * float(np.sum(held_res(T_fit) ** 2))
+        out["train_error"] = out["gain_error_after"]
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Time-domain verification
+# ---------------------------------------------------------------------------
+
+
+def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
+                       measures: BodyMeasures = REFERENCE, variant: str = "default",
+                       duration: float = 60.0, seed: int = 1, timeseries=None,
+                       progress: bool = False) -> dict:
+    """Simulate the measured excitation with `params` (nonlinear, time
+    domain), estimate the transmissibility as a lab would, and compare it
+    with the data.  The excitation is the recorded seat acceleration when
+    `timeseries` is given, else random 0.1-12 Hz per measured direction at
+    the measured level.  Fails on divergence, lost posture or instability."""
+    from ..analysis.spectral import transmissibility
+    from ..signals import make_seat_signal, signal_from_samples
+    from ..simulation import EquilibriumError, SimulationDiverged, settle, vibrate
+
+    out: dict = {"passed": True, "directions": {}}
+    try:
+        settled = settle(params, measures, variant)
+    except (SimulationDiverged, EquilibriumError) as e:
+        return {"passed": False, "reason": f"settling failed: {e}"}
+    posture = settled.summary
+    out["posture"] = {"max_joint_error_deg": posture["max_joint_error_deg"],
+                      "back_in_contact": posture["back_in_contact"]}
+    if posture["max_joint_error_deg"] > 0.5 or not posture["back_in_contact"]:
+        out["passed"] = False
+        out["reason"] = "posture lost after settling"
+    s = params.simulation
+    if timeseries is not None:
+        runs = {timeseries.meta.get("direction") or "recorded": signal_from_samples(
+            timeseries.t, timeseries.seat_acc, s.time_step_s, s.settle_time_s, 0.5)}
+    else:
+        runs = {}
+        for d in directions:
+            levels = frf.select(direction=d).level_rms
+            level = float(np.nanmedian(levels)) if np.isfinite(levels).any() else 0.1941
+            runs[d] = make_seat_signal("random", d, level, duration, seed, s.time_step_s,
+                                       s.settle_time_s, s.onset_time_s)
+    for label, sig in runs.items():
+        try:
+            run = vibrate(params, settled, sig, measures, variant, progress=progress)
+        except SimulationDiverged as e:
+            out["passed"] = False
+            out["reason"] = str(e)
+            out["directions"][label] = {"diverged": str(e)}
+            continue
+        est = transmissibility(run.after(sig.steady_start).to_timeseries())
+        errs = {}
+        for key in est.channels():
+            d, seg, dof = key[:3]
+            f, g, _, coh = frf.get(d, seg, dof) if len(frf.select(d, seg, dof)) else ([],) * 4
+            if len(f) == 0:
+                continue
+            ef, eg, _, ecoh = est.get(d, seg, dof)
+            gi = np.interp(f, ef, eg)
+            ok = (coh > 0.5) & (np.interp(f, ef, ecoh) > 0.5) & (g > 0) & (gi > 0)
+            if ok.sum() > 3:
+                errs[f"{d}/{seg}/{dof}"] = float(np.sqrt(np.mean(np.log(gi[ok] / g[ok]) ** 2)))
+        out["directions"][label] = {
+            "excitation": sig.description, "rms_log_gain_error": float(np.mean(list(
+                errs.values()))) if errs else None, "per_channel": errs,
+            "real_time_factor": run.meta["real_time_factor"]}
+    return out
+
+
+def safe_parameters(result: FitResult, frf: FrfData, verify, **kw):
+    """The fitted parameters if they pass `verify`, else the largest step
+    back towards the start (log-scale fractions 0.5, 0.25) that passes, else
+    the start.  Returns (params, fraction, verification)."""
+    from .parameters import apply_scales
+
+    x = np.log(result.scales)
+    last = None
+    for frac in (1.0, 0.5, 0.25, 0.0):
+        params = apply_scales(result.start, result.free, np.exp(frac * x))
+        last = verify(params, frf, result.directions, **kw)
+        if last["passed"]:
+            return params, frac, last
+    return result.start, 0.0, last
+
+
+# ---------------------------------------------------------------------------
+# Outputs
+# ---------------------------------------------------------------------------
+
+
+def write_outputs(result: FitResult, frf: FrfData, out: Path) -> list[str]:
+    from ..analysis.figures import plot_cases
+    from ..analysis.linear import frf_from_array
+
+    files = []
+    save_params(result.params, out / "params.yaml")
+    files.append("params.yaml")
+    (out / "fit_report.json").write_text(json.dumps(result.report, indent=1))
+    files.append("fit_report.json")
+    models = {"start": frf_from_array(result.T_start, result.freqs, result.directions),
+              "fitted": frf_from_array(result.T_fit, result.freqs, result.directions)}
+    files += [p.name for p in plot_cases(models, out, measured=frf, prefix="fit")]
+    return files

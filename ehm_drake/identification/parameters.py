@@ -1,0 +1,114 @@
+"""Free parameters of the identification: registry, bounds, scaling.
+
+The registry lives in `ehm_drake/data/fit_parameters.yaml` (with the
+physiological bounds and their sources).  A free parameter scales one or
+more parameter vectors of a `ModelParams` by a common factor s; the fit
+works on log(s).  Scale bounds follow from the absolute bounds and the
+starting values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..params import ModelParams, ParameterError, params_from_dict
+
+
+@dataclass(frozen=True)
+class FreeParameter:
+    name: str
+    paths: tuple[str, ...]
+    bounds: tuple[float, float]
+    unit: str
+
+
+def _registry_path() -> Path:
+    return Path(str(resources.files("ehm_drake") / "data" / "fit_parameters.yaml"))
+
+
+def load_registry() -> tuple[dict[str, FreeParameter], dict[str, list[str]]]:
+    data = yaml.safe_load(_registry_path().read_text())
+    params = {n: FreeParameter(n, tuple(d["paths"]), tuple(map(float, d["bounds"])), d["unit"])
+              for n, d in data["parameters"].items()}
+    return params, {g: list(v) for g, v in data["groups"].items()}
+
+
+def resolve_free(spec: str | None) -> list[FreeParameter]:
+    """Free parameters from a comma-separated list of groups and/or names
+    (default: the `default` group)."""
+    registry, groups = load_registry()
+    names: list[str] = []
+    for item in (spec or "default").split(","):
+        item = item.strip()
+        if not item:
+            continue
+        if item in groups:
+            names += groups[item]
+        elif item in registry:
+            names.append(item)
+        else:
+            raise ParameterError(
+                f"--free: unknown parameter or group {item!r}; groups: {', '.join(groups)}; "
+                f"parameters: {', '.join(registry)}")
+    seen = []
+    for n in names:
+        if n not in seen:
+            seen.append(n)
+    return [registry[n] for n in seen]
+
+
+def _get(d: dict, path: str):
+    for k in path.split("."):
+        d = d[k]
+    return d
+
+
+def _set(d: dict, path: str, value) -> None:
+    keys = path.split(".")
+    for k in keys[:-1]:
+        d = d[k]
+    d[keys[-1]] = value
+
+
+def values_of(params: ModelParams, free: FreeParameter) -> np.ndarray:
+    """All components of a free parameter's vectors (flattened)."""
+    d = params.to_dict()
+    return np.concatenate([np.atleast_1d(np.asarray(_get(d, p), float)) for p in free.paths])
+
+
+def representative(params: ModelParams, free: FreeParameter) -> float:
+    """A single number per free parameter: the largest component (the pitch
+    axis of a joint group, typically), for reports."""
+    return float(np.max(values_of(params, free)))
+
+
+def scale_bounds(params: ModelParams, free: FreeParameter) -> tuple[float, float]:
+    """Bounds on the scale factor keeping every non-zero component within
+    the absolute bounds."""
+    v = values_of(params, free)
+    v = v[v > 0]
+    if len(v) == 0:
+        raise ParameterError(f"free parameter {free.name} is zero in the starting parameters; "
+                             "it cannot be scaled (give it a non-zero start value)")
+    lo, hi = free.bounds
+    s_lo, s_hi = float(np.max(lo / v)), float(np.min(hi / v))
+    if s_lo > 1.0 or s_hi < 1.0:
+        raise ParameterError(
+            f"starting value of {free.name} ({representative(params, free):g} {free.unit}) is "
+            f"outside its physiological bounds [{lo:g}, {hi:g}] {free.unit}")
+    return s_lo, s_hi
+
+
+def apply_scales(params: ModelParams, free: list[FreeParameter], scales) -> ModelParams:
+    """A copy of `params` with each free parameter's vectors scaled."""
+    d = params.to_dict()
+    for fp, s in zip(free, scales, strict=True):
+        for path in fp.paths:
+            v = _get(d, path)
+            _set(d, path, [x * float(s) for x in v] if isinstance(v, list) else v * float(s))
+    return params_from_dict(d)

@@ -1,0 +1,54 @@
+"""Synthetic measured FRFs from the linear model, with estimation noise of a
+given coherence (for identification studies and tests; the lab-like
+nonlinear time-domain data generator is `ehm_drake.gap.synth`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..analysis.dataio import FrfData
+from ..analysis.linear import default_frequencies, frf_from_array, linearize
+from ..diagram import build_diagram
+from ..model.anthropometry import REFERENCE, BodyMeasures
+from ..params import ModelParams
+
+#: The paper's validation channels per direction (Desai et al. III-A).
+PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis", "pitch"),
+                        ("trunk", "pitch"), ("head", "pitch")],
+                  "y": [("pelvis", "y"), ("trunk", "y"), ("head", "y"), ("trunk", "roll"),
+                        ("head", "roll"), ("trunk", "yaw"), ("head", "yaw")],
+                  "z": [("pelvis", "z"), ("trunk", "z"), ("head", "z"), ("trunk", "pitch"),
+                        ("head", "pitch")]}
+
+
+def h1_noise_std(coherence: float, n_averages: int) -> float:
+    """Normalized random error of an H1 gain (Bendat & Piersol):
+    sqrt(1 - g^2) / (|g| sqrt(2 n)); also the phase error in rad."""
+    g2 = coherence**2
+    return float(np.sqrt(1.0 - g2) / (np.sqrt(g2) * np.sqrt(2.0 * n_averages)))
+
+
+def synthetic_frf(params: ModelParams, directions: str = "xyz", channels=None, freqs=None,
+                  coherence: float = 0.9, n_averages: int = 30, seed: int = 0,
+                  measures: BodyMeasures = REFERENCE, level_rms: float | None = None) -> FrfData:
+    """Linear-model transmissibility of `params` on the paper's channels, with
+    log-normal gain and Gaussian phase noise of an H1 estimate at the given
+    coherence and number of averages (seeded)."""
+    freqs = default_frequencies() if freqs is None else np.asarray(freqs, float)
+    lm = linearize(build_diagram(params, measures, None, guard=False, seat_forces=False),
+                   method="fd", outputs=["channels"])
+    frf = frf_from_array(lm.transmissibility_array(freqs, directions), freqs, directions,
+                         coherence)
+    chans = channels or PAPER_CHANNELS
+    keep = np.zeros(len(frf), bool)
+    for d in directions:
+        for seg, dof in chans[d]:
+            keep |= (frf.direction == d) & (frf.segment == seg) & (frf.dof == dof)
+    frf = frf._take(np.flatnonzero(keep))
+    rng = np.random.default_rng(seed)
+    sigma = h1_noise_std(coherence, n_averages)
+    gain = frf.gain * np.exp(sigma * rng.standard_normal(len(frf)))
+    phase = frf.phase_deg + np.degrees(sigma * rng.standard_normal(len(frf)))
+    phase = (phase + 180.0) % 360.0 - 180.0
+    return FrfData(frf.direction, frf.segment, frf.dof, frf.freq_hz, gain, phase,
+                   frf.coherence, None if level_rms is None else np.full(len(frf), level_rms))
