@@ -15,8 +15,7 @@ HERE = Path(__file__).resolve().parent
 def main() -> None:
     params = load_params()
     model = build_diagram(params, guard=False)
-    nq = model.plant.num_positions()
-    states = {v: settle(params, variant=v).state[:nq]
+    states = {v: settle(params, variant=v).positions
               for v in ("default", "no-integrator", "high-stiffness")}
     plot_posture(model, {"default (PID with integrator + HIS)": states["default"],
                          "no-integrator": states["no-integrator"],

@@ -139,7 +139,7 @@ def cmd_simulate(args) -> int:
     model = build_diagram(params, measures, None, args.variant, guard=False)
     ref = model.plant.GetPositions(model.plant.CreateDefaultContext())
     files.append(plot_posture(
-        model, {f"settled ({args.variant})": settled.state[:model.plant.num_positions()],
+        model, {f"settled ({args.variant})": settled.positions,
                 "initial (reference)": ref},
         out / "posture.png", f"Posture after settling, variant {args.variant}").name)
     files.append(plot_responses(result, out / "responses.png").name)
@@ -288,15 +288,6 @@ def _comfort_entry(m: dict) -> dict:
 # modes
 # ---------------------------------------------------------------------------
 
-#: Channels of the paper's validation per loading case (Desai et al. III-A).
-PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis", "pitch"),
-                        ("trunk", "pitch"), ("head", "pitch")],
-                  "y": [("pelvis", "y"), ("trunk", "y"), ("head", "y"), ("trunk", "roll"),
-                        ("head", "roll"), ("trunk", "yaw"), ("head", "yaw")],
-                  "z": [("pelvis", "z"), ("trunk", "z"), ("head", "z"), ("trunk", "pitch"),
-                        ("head", "pitch")]}
-
-
 def cmd_modes(args) -> int:
     from .analysis.figures import plot_cases
     from .analysis.linear import default_frequencies, linearize
@@ -316,6 +307,8 @@ def cmd_modes(args) -> int:
     frf = lm.transmissibility(f)
     frf.to_csv(out / "frf_linear.csv")
     participation = []
+    from .systems.outputs import PAPER_CHANNELS
+
     for d, channels in PAPER_CHANNELS.items():
         for seg, dof in channels:
             ff, gain, _, _ = frf.get(d, seg, dof)

@@ -13,7 +13,9 @@ input ports ``seat_acceleration`` and ``seat_displacement`` (3 each) so it
 can be driven or linearized; with one, a `SeatExcitation` drives them.
 Exported outputs: ``channels`` (30), ``seat_forces`` (12), ``state``
 (plant [q; v]), ``joint_torques`` (24 gimbal torques of the PID),
-``his_torque`` (3), ``seat_acceleration``, ``seat_displacement``.
+``his_torque`` (3), ``seat_acceleration``, ``seat_displacement``,
+``restraint_normal_displacement`` and ``restraint_deflection`` (per
+restraint point; see `ShearRestraints`).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, PassThrough, VectorLogSink
+from pydrake.systems.primitives import Adder, DiscreteTimeDelay, PassThrough, VectorLogSink
 
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .model.plant import HumanPlant, add_seated_human, passive_stiffness_vector, pid_vectors
@@ -30,7 +32,7 @@ from .params import ModelParams, apply_variant
 from .signals import SeatSignal
 from .systems.excitation import SeatExcitation
 from .systems.his import HeadInSpace
-from .systems.joints import JointPid, PassiveJoints
+from .systems.joints import CoContraction, JointPid, PassiveJoints
 from .systems.outputs import (
     CHANNEL_NAMES,
     SEGMENTS,
@@ -61,6 +63,7 @@ class EhmDiagram:
     systems: dict = field(default_factory=dict)
     loggers: dict = field(default_factory=dict)
     signal: SeatSignal | None = None
+    effects: dict = field(default_factory=dict)
 
     @property
     def plant(self):
@@ -94,6 +97,8 @@ def build_diagram(
     log_period: float | None = None,
     guard: bool = True,
     seat_forces: bool = True,
+    effects: dict | None = None,
+    controller_input: bool = False,
 ) -> EhmDiagram:
     """Build the closed-loop diagram of the seated human on its seat.
 
@@ -109,11 +114,20 @@ def build_diagram(
     seat_forces : add the `SeatForces` measurement (contact results: a
         second contact solve per evaluation; linearizations that only need
         the body channels leave it out, as does AutoDiff, which it blocks).
+    effects : candidate unmodelled effects to add, {name: {parameter:
+        value}} (see `ehm_drake.gap.effects`; default none).
+    controller_input : export an input port ``controller_state`` (plant
+        [q; v]) that the PID and head-in-space controllers read instead of
+        the plant state (the feedback loop cut open, for the gap
+        diagnosis' delayed-feedback linearization).
     """
+    from .gap.effects import validate_effects
+
     params = apply_variant(params, variant)
+    effects = validate_effects(effects)
     h = params.simulation.time_step_s
     builder = DiagramBuilder()
-    hp = add_seated_human(builder, params, measures)
+    hp = add_seated_human(builder, params, measures, effects)
     plant = hp.plant
     layout = hp.layout
     sys = {}
@@ -144,22 +158,45 @@ def build_diagram(
         JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
                  np.zeros(layout.num_rotational), h))
     # Seat: inertial load of the seat motion, shear restraints.
-    inertial = builder.AddNamedSystem("seat_inertial_load", SeatInertialLoad(plant, hp.human))
+    inertial = builder.AddNamedSystem("seat_inertial_load",
+                                      SeatInertialLoad(plant, [hp.human, hp.seat]))
     builder.Connect(accel_out, inertial.GetInputPort("seat_acceleration"))
     points = restraint_points(hp)
     restraints = builder.AddNamedSystem(
         "shear_restraints",
-        ShearRestraints(plant, points, restraint_parameters(params, points), h))
+        ShearRestraints(plant, points, _restraint_vector(params, points, effects), h))
     # Head-in-space control.
     gain = 1.0 if params.his.enabled else 0.0
     his = builder.AddNamedSystem(
         "head_in_space",
         HeadInSpace(plant, "head", "upper_torso", gain * np.array(params.his.kp),
                     gain * np.array(params.his.kd)))
-    forces = (passive, pid, restraints, his, inertial)
+    forces = [passive, pid, restraints, his, inertial]
+    if "cocontraction" in effects:
+        cc = builder.AddNamedSystem("cocontraction", CoContraction(
+            layout, effects["cocontraction"]["c_per_ms2"], cocontraction_gains(params, layout),
+            h, effects["cocontraction"]["tau_s"]))
+        builder.Connect(accel_out, cc.GetInputPort("seat_acceleration"))
+        forces.append(cc)
+        sys["cocontraction"] = cc
     adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
+    # The controllers' view of the body: the plant state, delayed by the
+    # reflex loop, or an exported input (the loop cut open).
+    feedback = state
+    tau = effects.get("reflex_delay", {}).get("tau_s", 0.0)
+    if controller_input:
+        fb_in = builder.AddNamedSystem("controller_state_input", PassThrough(layout.nq + layout.nv))
+        builder.ExportInput(fb_in.get_input_port(), "controller_state")
+        feedback = fb_in.get_output_port()
+    elif tau > 0:
+        steps = reflex_delay_steps(tau, h)
+        delay = builder.AddNamedSystem("reflex_delay", DiscreteTimeDelay(
+            h, steps, layout.nq + layout.nv))
+        builder.Connect(state, delay.get_input_port())
+        feedback = delay.get_output_port()
+        sys["reflex_delay"] = delay
     for i, s in enumerate(forces):
-        builder.Connect(state, s.GetInputPort("state"))
+        builder.Connect(feedback if s in (pid, his) else state, s.GetInputPort("state"))
         builder.Connect(s.GetOutputPort("generalized_force"), adder.get_input_port(i))
     builder.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
     sys.update(passive_joints=passive, joint_pid=pid, seat_inertial_load=inertial,
@@ -187,6 +224,8 @@ def build_diagram(
         "state": plant.get_state_output_port(),
         "joint_torques": pid.GetOutputPort("torque"),
         "his_torque": his.GetOutputPort("torque"),
+        "restraint_normal_displacement": restraints.GetOutputPort("normal_displacement"),
+        "restraint_deflection": restraints.GetOutputPort("deflection"),
         "seat_acceleration": accel_out,
         "seat_displacement": disp_out,
     }
@@ -206,7 +245,42 @@ def build_diagram(
             loggers[name] = log
     diagram = builder.Build()
     diagram.set_name("ehm_seated_human")
-    return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal)
+    return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
+
+
+#: Seat parts whose contact the seat_foam_stiffening / seat_friction /
+#: backrest_separation effects act on.
+SEAT_SURFACES = ("pan", "lower_pad", "upper_pad")
+BACK_PADS = ("lower_pad", "upper_pad")
+#: Joint groups whose active stiffness rises with co-contraction.
+COCONTRACTION_GROUPS = ("lumbar", "thoracic", "neck", "hips")
+
+
+def reflex_delay_steps(tau: float, h: float) -> int:
+    """The delay in whole time steps (at least one)."""
+    return max(1, int(round(tau / h)))
+
+
+def cocontraction_gains(params: ModelParams, layout) -> np.ndarray:
+    """Active stiffness kp per rotational DoF that co-contraction scales
+    (trunk, neck and hip DoFs; 0 elsewhere)."""
+    kp = pid_vectors(params, layout)["kp"]
+    return np.where([g in COCONTRACTION_GROUPS for g in layout.groups], kp, 0.0)
+
+
+def _restraint_vector(params: ModelParams, points, effects: dict) -> np.ndarray:
+    """The shear restraints' parameters with the seat effects applied."""
+    gated = BACK_PADS if "backrest_separation" in effects else ()
+    cubic = friction = None
+    if "seat_foam_stiffening" in effects:
+        # k3 = k gamma (gamma per mm^2 -> per m^2): k (1 + 3 gamma d^2) tangent.
+        gamma = effects["seat_foam_stiffening"]["gamma_per_mm2"] * 1e6
+        cubic = [getattr(params.contact, p.pair).stiffness * gamma if p.part in SEAT_SURFACES
+                 else 0.0 for p in points]
+    if "seat_friction" in effects:
+        mu = effects["seat_friction"]["mu"]
+        friction = [mu if p.part in SEAT_SURFACES else 0.0 for p in points]
+    return restraint_parameters(params, points, gated, cubic, friction)
 
 
 __all__ = ["EhmDiagram", "build_diagram", "CHANNEL_NAMES", "SEAT_FORCE_NAMES"]

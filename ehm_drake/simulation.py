@@ -37,6 +37,7 @@ from .params import PASSIVE_GROUPS, ModelParams
 from .signals import SeatSignal, make_seat_signal
 from .systems.outputs import CHANNEL_NAMES, SimulationDiverged
 from .systems.rotations import rpy_from_rotation
+from .systems.seat import restraint_block
 
 
 class EquilibriumError(RuntimeError):
@@ -77,6 +78,16 @@ class StateMap:
         ds = root_context.get_discrete_state()
         return np.concatenate([ds.get_vector(g).CopyToVector() for g in range(ds.num_groups())])
 
+    def transfer(self, other: StateMap, x_other: np.ndarray, x_default: np.ndarray) -> np.ndarray:
+        """This map's state vector with the groups of `other`'s state
+        `x_other` copied by system name; groups `other` lacks keep
+        `x_default`."""
+        x = np.array(x_default, float)
+        for name in self._index:
+            if name in other._index:
+                x[self.slice(name)] = x_other[other.slice(name)]
+        return x
+
     def set(self, root_context, x) -> None:
         ds = root_context.get_mutable_discrete_state()
         for g in range(ds.num_groups()):
@@ -94,10 +105,13 @@ class StateMap:
 # ---------------------------------------------------------------------------
 
 
-def model_fingerprint(params: ModelParams, measures: BodyMeasures, variant: str) -> str:
-    blob = json.dumps([params.to_dict(), [measures.mass_kg, measures.stature_m,
-                                          measures.resolved_sitting_height()], variant],
-                      sort_keys=True)
+def model_fingerprint(params: ModelParams, measures: BodyMeasures, variant: str,
+                      effects: dict | None = None) -> str:
+    items = [params.to_dict(), [measures.mass_kg, measures.stature_m,
+                                measures.resolved_sitting_height()], variant]
+    if effects:
+        items.append(effects)
+    blob = json.dumps(items, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
@@ -109,16 +123,35 @@ class SettledState:
     fingerprint: str
     variant: str
     summary: dict = field(default_factory=dict)
+    #: Where the plant's [q; v] sits in `state`: (start, nq, nv).
+    plant_layout: tuple = (0, 0, 0)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """The plant's generalized positions q (rad, m) in the settled state."""
+        start, nq, _ = self.plant_layout
+        if nq == 0:
+            raise ValueError("this settled state does not record the plant layout")
+        return self.state[start:start + nq]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        start, nq, nv = self.plant_layout
+        if nq == 0:
+            raise ValueError("this settled state does not record the plant layout")
+        return self.state[start + nq:start + nq + nv]
 
     def save(self, path: str | Path) -> None:
         np.savez(path, state=self.state, fingerprint=self.fingerprint, variant=self.variant,
-                 summary=json.dumps(self.summary))
+                 summary=json.dumps(self.summary), plant_layout=np.array(self.plant_layout))
 
     @classmethod
     def load(cls, path: str | Path) -> SettledState:
         with np.load(path, allow_pickle=False) as f:
+            layout = tuple(int(v) for v in f["plant_layout"]) if "plant_layout" in f \
+                else (0, 0, 0)
             return cls(f["state"], str(f["fingerprint"]), str(f["variant"]),
-                       json.loads(str(f["summary"])))
+                       json.loads(str(f["summary"])), layout)
 
 
 def _fixed_inputs(model: EhmDiagram, context) -> None:
@@ -150,7 +183,7 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
     _fixed_inputs(model, ctx)
     x = smap.get(ctx)
     plant = model.plant
-    nq, nv = plant.num_positions(), plant.num_velocities()
+    nq = plant.num_positions()
     ps = smap.slice("plant")
     pid = model.systems["joint_pid"]
     zs = smap.slice("joint_pid")
@@ -198,6 +231,16 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
             f"static equilibrium not found in {max_iterations} Newton iterations "
             f"(residual {np.max(np.abs(residual(x))):.3g})")
 
+    # Extra normal forces about the static compression (foam stiffening, the
+    # diagnosis' equivalent springs) are zero at equilibrium: solve without
+    # them, then put their reference at the equilibrium compression.
+    rctx = restraints.GetMyMutableContextFromRoot(ctx)
+    prm = rctx.get_mutable_numeric_parameter(restraints.parameter_index)
+    full = prm.CopyToVector()
+    about_reference = full.copy()
+    for block in ("normal_cubic_stiffness", "normal_linear_stiffness", "normal_linear_damping"):
+        restraint_block(about_reference, block)[:] = 0.0
+    prm.SetFromVector(about_reference)
     x = solve(x)
     if seat_in and len(pad_z):
         # Seating-in: anchor the pads' vertical restraints where the back is,
@@ -213,7 +256,20 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
             if change < 1e-8:
                 break
     smap.set(ctx, x)
+    prm.SetFromVector(full)
+    set_normal_reference(model, ctx)
     return ctx, smap
+
+
+def set_normal_reference(model: EhmDiagram, root_context) -> None:
+    """Reference of the restraints' extra normal forces := the current
+    normal displacement of each point (call at rest)."""
+    restraints = model.systems["shear_restraints"]
+    rctx = restraints.GetMyMutableContextFromRoot(root_context)
+    prm = rctx.get_mutable_numeric_parameter(restraints.parameter_index)
+    v = prm.CopyToVector()
+    restraint_block(v, "normal_reference")[:] = restraints.normal_displacement(rctx)
+    prm.SetFromVector(v)
 
 
 # ---------------------------------------------------------------------------
@@ -382,23 +438,46 @@ def posture_summary(model: EhmDiagram, root_context) -> dict:
     }
 
 
+def _without_delay(effects: dict | None) -> dict:
+    return {k: v for k, v in (effects or {}).items() if k != "reflex_delay"}
+
+
+def initial_state(model: EhmDiagram, x_plant_and_controllers: np.ndarray,
+                  source: StateMap) -> np.ndarray:
+    """The full state of `model` from a state of a diagram of the same plant
+    without the reflex delay (`source`): the delay buffer holds the plant
+    state throughout (the body has been at rest), other extra groups their
+    defaults."""
+    vmap = StateMap(model)
+    ctx = model.diagram.CreateDefaultContext()
+    x = vmap.transfer(source, x_plant_and_controllers, vmap.get(ctx))
+    if "reflex_delay" in model.systems:
+        sl = vmap.slice("reflex_delay")
+        xp = x_plant_and_controllers[source.slice("plant")]
+        x[sl] = np.tile(xp, (sl.stop - sl.start) // len(xp))
+    return x
+
+
 def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
            variant: str = "default", settle_time: float | None = None,
-           progress: bool = False) -> SettledState:
-    """Settle the body on the seat for `variant` (see module doc)."""
-    eq_model = build_diagram(params, measures, None, "default", guard=False)
+           progress: bool = False, effects: dict | None = None) -> SettledState:
+    """Settle the body on the seat for `variant` (see module doc), with the
+    candidate `effects` (see `ehm_drake.gap.effects`) if given."""
+    eq_model = build_diagram(params, measures, None, "default", guard=False,
+                             effects=_without_delay(effects))
     ctx, smap = static_equilibrium(eq_model)
     x_eq = smap.get(ctx)
     T = params.simulation.settle_time_s if settle_time is None else settle_time
-    model = build_diagram(params, measures, None, variant)
+    model = build_diagram(params, measures, None, variant, effects=effects)
     vctx = model.diagram.CreateDefaultContext()
     _fixed_inputs(model, vctx)
     vmap = StateMap(model)
-    x0 = x_eq.copy()
+    x0 = initial_state(model, x_eq, smap)
     if variant != "default":
         # Same equilibrium pose; without integrator there is no integral torque.
         x0[vmap.slice("joint_pid")] = 0.0
     vmap.set(vctx, x0)
+    set_normal_reference(model, vctx)
     start = posture_summary(model, vctx)
     simulator = _simulator(model, vctx)
     prog = Progress(f"settle ({variant})", T, progress) if progress else None
@@ -406,27 +485,39 @@ def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
     summary = posture_summary(model, vctx)
     summary["head_pitch_drift_deg"] = summary["head_pitch_deg"] - start["head_pitch_deg"]
     summary["settle_time_s"] = T
-    return SettledState(vmap.get(vctx), model_fingerprint(params, measures, variant), variant,
-                        summary)
+    plant = vmap.slice("plant")
+    return SettledState(vmap.get(vctx), model_fingerprint(params, measures, variant, effects),
+                        variant, summary, (plant.start, model.plant.num_positions(),
+                                           model.plant.num_velocities()))
 
 
 def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
             measures: BodyMeasures = REFERENCE, variant: str | None = None,
-            progress: bool = False) -> SimulationResult:
+            progress: bool = False, effects: dict | None = None) -> SimulationResult:
     """Play `signal` from the settled state; record at the output rate.
 
     The signal's settle time is skipped: the run starts from the settled
-    state at t = signal.settle_time.
+    state at t = signal.settle_time.  With the `cocontraction` effect the
+    running RMS of the seat acceleration starts at the signal's RMS over
+    its steady part (the subject has adapted to the level when recording
+    starts).
     """
     variant = variant or settled.variant
-    if settled.fingerprint != model_fingerprint(params, measures, variant):
-        raise ValueError("the settled state was computed for other parameters, body or "
-                         "variant; settle again")
+    if settled.fingerprint != model_fingerprint(params, measures, variant, effects):
+        raise ValueError("the settled state was computed for other parameters, body, "
+                         "variant or effects; settle again")
     period = 1.0 / params.simulation.output_rate_hz
-    model = build_diagram(params, measures, signal, variant, log_period=period)
+    model = build_diagram(params, measures, signal, variant, log_period=period, effects=effects)
     ctx = model.diagram.CreateDefaultContext()
     smap = StateMap(model)
-    smap.set(ctx, settled.state)
+    x = np.array(settled.state, float)
+    if "cocontraction" in model.systems:
+        steady = signal.acceleration[int(round((signal.settle_time + signal.onset_time)
+                                               / signal.time_step)):]
+        ms = float(np.mean(np.sum(steady**2, axis=1))) if len(steady) else 0.0
+        x[smap.slice("cocontraction")] = ms
+    smap.set(ctx, x)
+    set_normal_reference(model, ctx)
     ctx.SetTime(signal.settle_time)
     # Outputs are relative to the settled pose.
     channels = model.systems["body_channels"]
@@ -458,6 +549,7 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
         positions=logs["state"].data().T[:, :model.plant.num_positions()],
         meta={
             "variant": variant,
+            "effects": model.effects,
             "signal": signal.meta,
             "simulated_s": float(t[-1] - t[0]) if len(t) else 0.0,
             "wall_s": wall,
@@ -482,16 +574,17 @@ class SimulationInterrupted(KeyboardInterrupt):
 def simulate(params: ModelParams, measures: BodyMeasures = REFERENCE, variant: str = "default",
              signal: SeatSignal | None = None, direction: str = "z", rms: float = 0.1941,
              duration: float = 60.0, seed: int = 0, settled: SettledState | None = None,
-             progress: bool = False):
+             progress: bool = False, effects: dict | None = None):
     """Settle (or reuse `settled`) and vibrate.  Returns (SettledState,
     SimulationResult)."""
     if settled is None:
-        settled = settle(params, measures, variant, progress=progress)
+        settled = settle(params, measures, variant, progress=progress, effects=effects)
     if signal is None:
         s = params.simulation
         signal = make_seat_signal("random", direction, rms, duration, seed, s.time_step_s,
                                   s.settle_time_s, s.onset_time_s)
-    return settled, vibrate(params, settled, signal, measures, variant, progress=progress)
+    return settled, vibrate(params, settled, signal, measures, variant, progress=progress,
+                            effects=effects)
 
 
 __all__ = [

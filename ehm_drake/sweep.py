@@ -84,10 +84,8 @@ import io
 import itertools
 import json
 import math
-import multiprocessing
 import os
 import re
-import signal
 import socket
 import sys
 import tempfile
@@ -100,6 +98,8 @@ from typing import Any
 
 import numpy as np
 import yaml
+
+from .parallel import process_pool
 
 #: Version of the run record format (part of every run id).
 RUN_FORMAT = 1
@@ -931,11 +931,6 @@ def execute_run(inputs: Mapping[str, Any]) -> dict[str, Any]:
     return record
 
 
-def _ignore_sigint() -> None:
-    """Pool worker initializer: Ctrl-C is the parent's to handle."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 # ---------------------------------------------------------------------------
 # Storage
 # ---------------------------------------------------------------------------
@@ -1151,9 +1146,7 @@ def run_sweep(spec: SweepSpec | Mapping[str, Any] | str | Path, out_dir: str | P
             client = _dask_client(scheduler)
             executor = client.get_executor(pure=False)
         elif executor is None:
-            own_pool = cf.ProcessPoolExecutor(
-                max_workers=min(max_workers or os.cpu_count() or 1, len(todo)),
-                mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_sigint)
+            own_pool = process_pool(min(max_workers or os.cpu_count() or 1, len(todo)))
             executor = own_pool
     try:
         interrupted = _drive(executor, client, todo, store, prog, max_workers, own_pool)

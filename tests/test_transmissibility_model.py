@@ -19,7 +19,6 @@ from ehm_drake.simulation import (
     static_equilibrium,
 )
 
-
 PAN = ("pelvis_pan", "thighs_pan")
 OFF = ("feet_floor", "lower_back_pad", "upper_back_pad")
 

@@ -17,6 +17,8 @@ Several tools read them, so they are kept exactly as specified here.
 * ``coherence`` -- ordinary (or multiple) coherence, in [0, 1];
 * ``level_rms`` -- optional: seat acceleration RMS of the test (m/s^2, > 0). An empty cell
   means "not given" and is read as NaN.
+* ``n_averages`` -- optional: number of (Welch) averages of the estimate (>= 1); with the
+  coherence it gives the estimate's random error.  An empty cell means "not given" (NaN).
 
 ``timeseries.csv`` -- time histories on seat-aligned axes::
 
@@ -87,7 +89,7 @@ FRF_COLUMNS: tuple[str, ...] = (
     "phase_deg",
     "coherence",
 )
-FRF_OPTIONAL_COLUMNS: tuple[str, ...] = ("level_rms",)
+FRF_OPTIONAL_COLUMNS: tuple[str, ...] = ("level_rms", "n_averages")
 SEAT_COLUMNS: tuple[str, ...] = ("seat_ax", "seat_ay", "seat_az")
 
 #: Minimum record length accepted by :func:`read_timeseries` (s).
@@ -281,6 +283,8 @@ class FrfData:
         Coherence in [0, 1].
     level_rms : numpy.ndarray, shape (n,)
         Seat acceleration RMS of the test (m/s^2); NaN where not given.
+    n_averages : numpy.ndarray, shape (n,)
+        Number of averages of the estimate; NaN where not given.
 
     Notes
     -----
@@ -296,6 +300,7 @@ class FrfData:
     phase_deg: np.ndarray
     coherence: np.ndarray
     level_rms: np.ndarray | None = None
+    n_averages: np.ndarray | None = None
     _row_labels: np.ndarray | None = field(default=None, repr=False, compare=False)
     _source: str | None = field(default=None, repr=False, compare=False)
 
@@ -313,7 +318,9 @@ class FrfData:
         assert n is not None
         if self.level_rms is None:
             self.level_rms = np.full(n, np.nan)
-        for name in ("freq_hz", "gain", "phase_deg", "coherence", "level_rms"):
+        if self.n_averages is None:
+            self.n_averages = np.full(n, np.nan)
+        for name in ("freq_hz", "gain", "phase_deg", "coherence", "level_rms", "n_averages"):
             try:
                 arr = np.asarray(getattr(self, name), dtype=np.float64).reshape(-1)
             except (TypeError, ValueError) as exc:
@@ -373,6 +380,10 @@ class FrfData:
             fail(
                 bad, "level_rms", lambda i: f"level_rms must be > 0 m/s^2, got {self.level_rms[i]}"
             )
+        bad = np.flatnonzero(np.isinf(self.n_averages) | (self.n_averages < 1))
+        if bad.size:
+            fail(bad, "n_averages",
+                 lambda i: f"n_averages must be a number >= 1, got {self.n_averages[i]}")
         # duplicated (channel, level, frequency) rows are ambiguous; found by a
         # vectorized sort (a Python loop over rows cost 40 ms on a linear FRF).
         if n > 1:
@@ -419,8 +430,9 @@ class FrfData:
                 )
             for c in FRF_COLUMNS:
                 cols[c].append(r[c])
-            lv = r.get("level_rms")
-            cols["level_rms"].append(np.nan if lv is None else lv)
+            for c in FRF_OPTIONAL_COLUMNS:
+                v = r.get(c)
+                cols[c].append(np.nan if v is None else v)
         return cls(**{c: np.asarray(v) for c, v in cols.items()})
 
     @classmethod
@@ -445,6 +457,11 @@ class FrfData:
     def has_level(self) -> bool:
         """True if any row carries a ``level_rms`` value."""
         return bool(np.any(np.isfinite(self.level_rms)))
+
+    @property
+    def has_n_averages(self) -> bool:
+        """True if any row carries an ``n_averages`` value."""
+        return bool(np.any(np.isfinite(self.n_averages)))
 
     def _key(self, i: int) -> tuple:
         lv = self.level_rms[i]
@@ -555,9 +572,10 @@ class FrfData:
     # -- output ------------------------------------------------------------------------
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write ``frf.csv`` (``level_rms`` column only when some row has a level)."""
+        """Write ``frf.csv`` (the optional columns only when some row has a value)."""
         path = Path(path)
-        cols = list(FRF_COLUMNS) + (["level_rms"] if self.has_level else [])
+        cols = (list(FRF_COLUMNS) + (["level_rms"] if self.has_level else [])
+                + (["n_averages"] if self.has_n_averages else []))
         with path.open("w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh, lineterminator="\n")
             w.writerow(cols)
@@ -573,6 +591,8 @@ class FrfData:
                 ]
                 if self.has_level:
                     row.append(_fmt(self.level_rms[i]))
+                if self.has_n_averages:
+                    row.append(_fmt(self.n_averages[i]))
                 w.writerow(row)
         return path
 
@@ -612,7 +632,7 @@ def read_frf(path: str | Path) -> FrfData:
     if missing:
         raise DataFormatError(
             f"{_where(source, header_line)}missing column(s) {missing}; header must be "
-            f"{','.join(FRF_COLUMNS)}[,level_rms]"
+            f"{','.join(FRF_COLUMNS)}[,level_rms][,n_averages]"
         )
     unknown = [c for c in header if c not in FRF_COLUMNS + FRF_OPTIONAL_COLUMNS]
     if unknown:
@@ -629,10 +649,9 @@ def read_frf(path: str | Path) -> FrfData:
         data[name] = np.array([c.strip() for c in col[name]], dtype=str)
     for name in ("freq_hz", "gain", "phase_deg", "coherence"):
         data[name] = _to_float_column(col[name], name, source, first)
-    if "level_rms" in col:
-        data["level_rms"] = _to_float_column(
-            col["level_rms"], "level_rms", source, first, allow_empty=True
-        )
+    for name in FRF_OPTIONAL_COLUMNS:
+        if name in col:
+            data[name] = _to_float_column(col[name], name, source, first, allow_empty=True)
     labels = np.array([f"line {first + i}" for i in range(len(body))], dtype=object)
     return FrfData(**data, _row_labels=labels, _source=source)
 

@@ -464,37 +464,48 @@ def linearize_system(diagram, root_context, output_ports, h: float, method: str 
     return LinearModel(A, B, C, D, h, names, out_names, x0, y0, state_groups, out_groups, used)
 
 
-def _linearize_fd(diagram, ctx, smap, ports, eps, central=True):
-    """Central (or forward: half the cost, O(eps) error) differences."""
-    a_port = diagram.GetInputPort("seat_acceleration")
+def _linearize_fd(diagram, ctx, smap, ports, eps, central=True, inputs=None):
+    """Central (or forward: half the cost, O(eps) error) differences.
+
+    `inputs`: [(input port name, FD step)] to differentiate with respect to
+    (default: the seat acceleration, step `INPUT_FD_STEP`); other input
+    ports keep their fixed values.  Returns A, B (inputs stacked), C, D."""
+    inputs = inputs or [("seat_acceleration", INPUT_FD_STEP)]
+    in_ports = [diagram.GetInputPort(name) for name, _ in inputs]
+    u0s = [p.Eval(ctx) for p in in_ports]
+    sizes = [len(u) for u in u0s]
     x0 = smap.get(ctx)
     n = len(x0)
+    m = sum(sizes)
+    u0 = np.concatenate(u0s)
+    splits = np.cumsum(sizes)[:-1]
 
     def evaluate(x, u):
         smap.set(ctx, x)
-        a_port.FixValue(ctx, u)
+        for port, part in zip(in_ports, np.split(u, splits), strict=True):
+            port.FixValue(ctx, part)
         return smap.step(ctx), np.concatenate([diagram.GetOutputPort(p).Eval(ctx) for p in ports])
 
-    u0 = np.zeros(3)
     cols_x, cols_y = [], []
     if not central:
         xc, yc = evaluate(x0, u0)
     # The seat input is perturbed by 1 m/s^2: its effect on one step (h * 1
     # m/s) must stand well above SAP's solution tolerance (~1e-8 m/s), and
     # the model is linear in it (inertial load) anyway.
-    steps = np.r_[np.full(n, eps), np.full(3, INPUT_FD_STEP)]
-    for j in range(n + 3):
-        ep = np.zeros(n + 3)
+    steps = np.r_[np.full(n, eps), np.repeat([step for _, step in inputs], sizes)]
+    for j in range(n + m):
+        ep = np.zeros(n + m)
         ep[j] = steps[j]
-        eps = steps[j]
+        e = steps[j]
         xp, yp = evaluate(x0 + ep[:n], u0 + ep[n:])
         if central:
             xm, ym = evaluate(x0 - ep[:n], u0 - ep[n:])
-            cols_x.append((xp - xm) / (2 * eps))
-            cols_y.append((yp - ym) / (2 * eps))
+            cols_x.append((xp - xm) / (2 * e))
+            cols_y.append((yp - ym) / (2 * e))
         else:
-            cols_x.append((xp - xc) / eps)
-            cols_y.append((yp - yc) / eps)
+            cols_x.append((xp - xc) / e)
+            cols_y.append((yp - yc) / e)
+    evaluate(x0, u0)  # leave the context as found
     J = np.array(cols_x).T
     K = np.array(cols_y).T
     return J[:, :n], J[:, n:], K[:, :n], K[:, n:]

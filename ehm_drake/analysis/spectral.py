@@ -46,6 +46,7 @@ from .dataio import (
 
 __all__ = [
     "DEFAULT_BAND",
+    "TRANSMISSIBILITY_BAND",
     "DEFAULT_RESOLUTION_HZ",
     "FrfEstimate",
     "MimoEstimate",
@@ -61,6 +62,11 @@ __all__ = [
 
 #: Band of the paper's Butterworth band-pass (Hz); 0.05 Hz instead of 0 removes drift.
 DEFAULT_BAND: tuple[float, float] = (0.05, 12.0)
+#: Band of `transmissibility`: the paper's 0-12 Hz low-pass.  No high-pass
+#: edge: the second difference has no drift to remove, and a 0.05 Hz
+#: high-pass rang over the whole of a 60 s record, corrupting the bins
+#: below 0.3 Hz (gains off by 0.5-4.5x, coherence lost, in random tests).
+TRANSMISSIBILITY_BAND: tuple[float | None, float] = (None, 12.0)
 #: Target frequency resolution of the default Welch segment (Hz).
 DEFAULT_RESOLUTION_HZ: float = 0.075
 #: Minimum number of Welch averages the default segment length aims for.
@@ -491,7 +497,7 @@ def _excited_directions(
 def transmissibility(
     ts: TimeSeriesData,
     directions: str | Sequence[str] | None = None,
-    band: Sequence[float | None] = DEFAULT_BAND,
+    band: Sequence[float | None] = TRANSMISSIBILITY_BAND,
     f_max: float = 12.0,
     nperseg: int | None = None,
     noverlap: int | None = None,
@@ -537,7 +543,8 @@ def transmissibility(
     directions : str or sequence of str, optional
         Excited axes, e.g. ``"z"`` or ``"xz"``.
     band : (float or None, float)
-        Butterworth band applied (zero-phase) to seat and body signals alike.
+        Butterworth band applied (zero-phase) to seat and body signals alike (default:
+        the 0-12 Hz low-pass, `TRANSMISSIBILITY_BAND`).
         ``None`` disables filtering.
     f_max : float
         Only rows with ``0 < f <= f_max`` are returned.
@@ -556,7 +563,7 @@ def transmissibility(
     FrfData
         Rows ordered by direction, channel, frequency.  ``level_rms`` is
         ``ts.meta['level_rms']`` if given, else the RMS of the (mean-removed, unfiltered)
-        seat acceleration on that axis.
+        seat acceleration on that axis; ``n_averages`` the number of Welch segments.
 
     Raises
     ------
@@ -592,9 +599,11 @@ def transmissibility(
         f = est.f
         Hs = est.H[:, :, None]  # (nf, m, 1)
         coh = est.coherence  # (nf, m)
+        n_avg = est.n_averages
     else:
         mest = mimo_h1(seat[:, cols], Y2, fs, nperseg, noverlap, window, detrend)
         f, Hs, coh = mest.f, mest.H, mest.multiple_coherence
+        n_avg = mest.n_averages
     sel = (f > max(f_min, 0.0)) & (f <= f_max + 1e-9 * f_max)
     if not np.any(sel):
         raise ValueError(f"no frequency bin in (0, {f_max}] Hz; use a longer nperseg")
@@ -627,6 +636,7 @@ def transmissibility(
                     phase_deg=np.degrees(np.angle(T[:, k, j])),
                     coherence=coh[:, k],
                     level_rms=np.full(nf, level if level > 0 else np.nan),
+                    n_averages=np.full(nf, float(n_avg)),
                 )
             )
     try:

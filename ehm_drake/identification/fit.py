@@ -36,7 +36,6 @@ is not on a bound, and it correlates with no other free parameter at
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import json
 import math
 import sys
@@ -50,6 +49,7 @@ from scipy.optimize import least_squares
 
 from ..analysis.dataio import FrfData
 from ..model.anthropometry import REFERENCE, BodyMeasures
+from ..parallel import process_pool
 from ..params import ModelParams, ParameterError, params_from_dict, save_params
 from ..systems.outputs import CHANNEL_NAMES
 from .parameters import (
@@ -404,8 +404,7 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
     r0 = res(T0)
     tracker = _Tracker(progress, 0.5 * float(r0 @ r0))
     tracker.record(x0, r0)
-    pool = (cf.ProcessPoolExecutor(workers, initializer=_init_worker, initargs=(ev, res))
-            if workers > 1 else None)
+    pool = process_pool(workers, _init_worker, (ev, res)) if workers > 1 else None
     cache: dict = {}
 
     def fun(x):

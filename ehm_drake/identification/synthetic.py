@@ -11,15 +11,9 @@ from ..analysis.linear import default_frequencies, frf_from_array, linearize
 from ..diagram import build_diagram
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..params import ModelParams
+from ..systems.outputs import PAPER_CHANNELS
 
-#: The paper's validation channels per direction (Desai et al. III-A).
-PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis", "pitch"),
-                        ("trunk", "pitch"), ("head", "pitch")],
-                  "y": [("pelvis", "y"), ("trunk", "y"), ("head", "y"), ("trunk", "roll"),
-                        ("head", "roll"), ("trunk", "yaw"), ("head", "yaw")],
-                  "z": [("pelvis", "z"), ("trunk", "z"), ("head", "z"), ("trunk", "pitch"),
-                        ("head", "pitch")]}
-
+__all__ = ["PAPER_CHANNELS", "h1_noise_std", "synthetic_frf"]
 
 def h1_noise_std(coherence: float, n_averages: int) -> float:
     """Normalized random error of an H1 gain (Bendat & Piersol):

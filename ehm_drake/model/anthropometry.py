@@ -313,8 +313,13 @@ def _box_inertia(mass, size):
     return mass / 12.0 * np.diag([y * y + z * z, x * x + z * z, x * x + y * y])
 
 
-def _reference_body() -> Body:
-    """The 50th-percentile male of the paper: 75.3 kg, 1.76 m, 0.92 m."""
+def _reference_body(separate_arms: bool = False) -> Body:
+    """The 50th-percentile male of the paper: 75.3 kg, 1.76 m, 0.92 m.
+
+    With `separate_arms`, each arm (upper arm, forearm and hand, rigid in
+    the seated pose, hand on the thigh) is its own segment on a spherical
+    shoulder joint instead of being lumped into the upper torso (the `arms`
+    effect of the gap diagnosis)."""
     M = REFERENCE.mass_kg
     length_scale = REFERENCE.stature_m / DE_LEVA_SAMPLE_STATURE_M
     L = {k: v[0] / 1000.0 * length_scale for k, v in DE_LEVA_1996_MALE.items()}
@@ -364,15 +369,18 @@ def _reference_body() -> Body:
         "lower_torso", "ball", "lumbar_L4L5", "trunk", "de Leva MPT",
     )
 
-    # Upper torso: UPT with both arms lumped at their seated positions.
+    # Upper torso: UPT with both arms lumped at their seated positions (or,
+    # with `separate_arms`, the arms as their own segments, see below).
     m_upt, I_upt = deleva("upt")
     parts = [(m_upt, com["upt"], I_upt)]
+    arm_parts = {}
     for side in ("l", "r"):
         chain = [
             ("upper_arm", lm[f"shoulder_{side}"], lm[f"elbow_{side}"]),
             ("forearm", lm[f"elbow_{side}"], lm[f"wrist_{side}"]),
             ("hand", lm[f"wrist_{side}"], lm[f"hand_{side}"]),
         ]
+        arm_parts[side] = []
         for name, prox, dist in chain:
             m = frac[name] * M
             c = _lerp(prox, dist, DE_LEVA_1996_MALE[name][2] / 100.0)
@@ -381,13 +389,16 @@ def _reference_body() -> Body:
             inertia = _rotate_about_y(
                 _radii_inertia(m, L[name], *radii[name], long_axis=2), pitch
             )
-            parts.append((m, c, inertia))
+            arm_parts[side].append((m, c, inertia))
+    if not separate_arms:
+        parts += arm_parts["l"] + arm_parts["r"]
     m_ut, com_ut, I_ut = _combine(parts)
     com["upper_torso"] = com_ut
     segs["upper_torso"] = Segment(
         "upper_torso", m_ut, lm["T12L1"], com_ut, I_ut, "middle_torso",
         "ball+prismatic", "thoracolumbar_T12L1", "trunk",
-        "de Leva UPT + both arms (upper arm, forearm, hand) lumped",
+        "de Leva UPT" + ("" if separate_arms else
+                         " + both arms (upper arm, forearm, hand) lumped"),
     )
 
     # Neck and head: de Leva head (vertex-cervicale) split.  Neck = uniform
@@ -415,6 +426,14 @@ def _reference_body() -> Body:
         "head", m_head, lm["C0C1"], com["head"], I_head, "neck", "ball",
         "upper_neck_C0C1", "trunk", "de Leva head minus neck",
     )
+
+    if separate_arms:
+        for side in ("l", "r"):
+            m, c, inertia = _combine(arm_parts[side])
+            segs[f"arm_{side}"] = Segment(
+                f"arm_{side}", m, lm[f"shoulder_{side}"], c, inertia, "upper_torso", "ball",
+                f"shoulder_{side}", "trunk",
+                "de Leva upper arm + forearm + hand, rigid in the seated pose")
 
     # Legs.
     for side in ("l", "r"):
@@ -518,15 +537,18 @@ def _scale_maps(measures: BodyMeasures):
     return lam_m, S_trunk, S_leg
 
 
-def build_body(measures: BodyMeasures = REFERENCE) -> Body:
+def build_body(measures: BodyMeasures = REFERENCE, separate_arms: bool = False,
+               viscera_kg: float = 0.0) -> Body:
     """The model body for `measures`, scaled from the 50th-percentile male.
 
-    Raises ValueError for anthropometry outside the adult range.
+    `separate_arms` and `viscera_kg` give the extended bodies of the gap
+    diagnosis' `arms` and `visceral_mass` effects.  Raises ValueError for
+    anthropometry outside the adult range.
     """
     measures.validate()
-    ref = _reference_body()
+    ref = _reference_body(separate_arms)
     if measures == REFERENCE:
-        return ref
+        return with_viscera(ref, viscera_kg)
     lam_m, S_trunk, S_leg = _scale_maps(measures)
 
     hips = {"l": ref.landmarks["hip_l"], "r": ref.landmarks["hip_r"]}
@@ -572,4 +594,42 @@ def build_body(measures: BodyMeasures = REFERENCE) -> Body:
     }
     body = Body(measures, segs, lm, markers, SeatGeometry({}))
     body.seat = _seat_for(body)
-    return body
+    return with_viscera(body, viscera_kg)
+
+
+#: Abdominal viscera centre of mass: ~4 cm anterior of the middle-torso CoM,
+#: at its height (the abdominal cavity lies in front of the lumbar spine).
+VISCERA_OFFSET_M = np.array([0.04, 0.0, 0.0])
+
+
+def with_viscera(body: Body, mass_kg: float) -> Body:
+    """`body` with `mass_kg` of abdominal viscera taken out of the middle
+    torso (a point mass at its centre, removed with its parallel-axis
+    inertia) and put on its own segment, a uniform sphere of radius 0.07 m
+    on a vertical prismatic joint (the `visceral_mass` effect)."""
+    if mass_kg <= 0:
+        return body
+    mt = body.segments["middle_torso"]
+    if mass_kg >= 0.5 * mt.mass:
+        raise ValueError(f"viscera mass {mass_kg} kg exceeds half the middle torso's "
+                         f"{mt.mass:.1f} kg")
+    c_v = mt.com_W + VISCERA_OFFSET_M
+    m_rest = mt.mass - mass_kg
+    com_rest = (mt.mass * mt.com_W - mass_kg * c_v) / m_rest
+    # I_mt (about com_mt) = I_rest shifted + point mass shifted.
+    I_rest = (mt.inertia_W - _parallel_axis(mass_kg, np.zeros((3, 3)), c_v - mt.com_W)
+              - _parallel_axis(m_rest, np.zeros((3, 3)), com_rest - mt.com_W))
+    I_v = 0.4 * mass_kg * 0.07**2 * np.eye(3)
+    I_rest = I_rest - I_v  # the sphere's own inertia came out of the torso too
+    segs = {}
+    for name, seg in body.segments.items():
+        if name == "middle_torso":
+            seg = Segment(seg.name, m_rest, seg.origin_W, com_rest, I_rest, seg.parent,
+                          seg.joint, seg.joint_name, seg.group,
+                          seg.source + f" minus {mass_kg:g} kg viscera", seg.collision)
+        segs[name] = seg
+        if name == "middle_torso":
+            segs["viscera"] = Segment(
+                "viscera", mass_kg, c_v.copy(), c_v.copy(), I_v, "middle_torso",
+                "prismatic_z", "visceral_z", "trunk", "abdominal viscera (point-like)")
+    return Body(body.measures, segs, body.landmarks, body.markers, body.seat)

@@ -26,7 +26,7 @@ No friction: shear is carried by the point restraints of
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
@@ -148,20 +148,22 @@ class HumanPlant:
     seat_geometries: dict[str, object]
     contact_model: str
     time_step: float
+    effects: dict = field(default_factory=dict)
 
     @property
     def num_dofs(self) -> int:
         return self.plant.num_velocities()
 
 
-def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures):
+def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures, effects: dict):
     parser = configure_parser(Parser(plant))
-    if measures == REFERENCE:
+    if measures == REFERENCE and not effects:
         (human,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{HUMAN_SDF_NAME}")
         (seat,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{SEAT_SDF_NAME}")
     else:
+        cushion = effects.get("seat_cushion_dynamics", {}).get("mass_kg", 0.0)
         (human,) = parser.AddModelsFromString(human_sdf(body), "sdf")
-        (seat,) = parser.AddModelsFromString(seat_sdf(body), "sdf")
+        (seat,) = parser.AddModelsFromString(seat_sdf(body, cushion), "sdf")
     return human, seat
 
 
@@ -169,9 +171,26 @@ def add_seated_human(
     builder: DiagramBuilder,
     params: ModelParams,
     measures: BodyMeasures = REFERENCE,
+    effects: dict | None = None,
 ) -> HumanPlant:
-    """Add the plant (+ SceneGraph) of the seated human to `builder`."""
-    body = build_body(measures)
+    """Add the plant (+ SceneGraph) of the seated human to `builder`.
+
+    `effects` ({name: {parameter: value}}, see `ehm_drake.gap.effects`)
+    extends the model with the gap diagnosis' candidate effects that change
+    the multibody system: separate arms, visceral mass, seat cushion,
+    backrest pads further back (the others act through the diagram's
+    systems, see `ehm_drake.diagram.build_diagram`).
+    """
+    from ..gap.effects import validate_effects
+
+    effects = validate_effects(effects)
+    viscera = effects.get("visceral_mass", {}).get("mass_kg", 0.0)
+    body = build_body(measures, separate_arms="arms" in effects, viscera_kg=viscera)
+    if "backrest_separation" in effects:
+        offset = effects["backrest_separation"]["offset_mm"] * 1e-3
+        for pad in ("lower_pad", "upper_pad"):
+            c, size = body.seat.boxes[pad]
+            body.seat.boxes[pad] = (c - np.array([offset, 0.0, 0.0]), size)
     config = MultibodyPlantConfig(
         time_step=params.simulation.time_step_s,
         discrete_contact_approximation="sap",
@@ -182,12 +201,13 @@ def add_seated_human(
     )
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
-    human, seat = _load_models(plant, body, measures)
+    human, seat = _load_models(plant, body, measures, effects)
     pelvis = plant.GetBodyByName("pelvis", human)
     free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
     free.set_default_translation(body.segments["pelvis"].origin_W)
     _set_default_joint_damping(plant, human, params)
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
+    _add_effect_elements(plant, human, seat, body, effects)
     plant.Finalize()
     return HumanPlant(
         plant=plant,
@@ -200,6 +220,7 @@ def add_seated_human(
         seat_geometries=seat_geoms,
         contact_model=params.contact.model,
         time_step=params.simulation.time_step_s,
+        effects=effects,
     )
 
 
@@ -237,7 +258,7 @@ def _joint_layout(plant: MultibodyPlant, human) -> JointLayout:
 def _per_dof(layout: JointLayout, group_of, attr: str) -> np.ndarray:
     """Value of `attr` ([x, y, z] per group) for each rotational DoF."""
     return np.array(
-        [getattr(group_of(g), attr)[axis] for g, axis in zip(layout.groups, layout.axes)]
+        [getattr(group_of(g), attr)[axis] for g, axis in zip(layout.groups, layout.axes, strict=True)]
     )
 
 
@@ -402,3 +423,79 @@ def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body)
                     CollisionFilterDeclaration().ExcludeBetween(GeometrySet(gid), GeometrySet(sid))
                 )
     return body_geoms, seat_geoms
+
+
+# ---------------------------------------------------------------------------
+# Gap-diagnosis effects that add force elements
+# ---------------------------------------------------------------------------
+
+
+def _add_effect_elements(plant, human, seat, body: Body, effects: dict) -> None:
+    """Springs and dampers of the effect extensions (see gap.effects)."""
+    from pydrake.math import RigidTransform
+    from pydrake.multibody.tree import FixedOffsetFrame, LinearBushingRollPitchYaw
+
+    zero = np.zeros(3)
+    if "arms" in effects:
+        from pydrake.math import RollPitchYaw
+
+        k_sh = effects["arms"]["shoulder_stiffness"]
+        k_h = effects["arms"]["hand_stiffness"]
+        for side in ("l", "r"):
+            joint = plant.GetJointByName(f"shoulder_{side}", human)
+            arm = body.segments[f"arm_{side}"]
+            p_hand = body.landmarks[f"hand_{side}"]
+            thigh = body.segments[f"thigh_{side}"]
+            # Statics of the placed arm (the reference pose is its rest
+            # position for every stiffness): the thigh carries the hand
+            # vertically with the force balancing the arm's weight moment in
+            # pitch about the shoulder; the shoulder the remaining moment.
+            # Both springs are preloaded accordingly (their rest positions
+            # are offset), so only their stiffness changes the dynamics.
+            r_c, r_h = arm.com_W - arm.origin_W, p_hand - arm.origin_W
+            weight = np.array([0.0, 0.0, -9.81 * arm.mass])
+            F_hand = np.array([0.0, 0.0, arm.mass * 9.81 * r_c[0] / r_h[0]])
+            T_shoulder = -(np.cross(r_c, weight) + np.cross(r_h, F_hand))
+            # Damping ratio 0.2 on the arm's pitch inertia about the shoulder.
+            I_sh = arm.inertia_W[1, 1] + arm.mass * float(np.sum(r_c[[0, 2]] ** 2))
+            rest = plant.AddFrame(FixedOffsetFrame(
+                f"shoulder_spring_rest_{side}", joint.frame_on_parent(),
+                RigidTransform(RollPitchYaw(T_shoulder / k_sh), np.zeros(3))))
+            plant.AddForceElement(LinearBushingRollPitchYaw(
+                rest, joint.frame_on_child(), np.full(3, k_sh),
+                np.full(3, 0.4 * np.sqrt(k_sh * I_sh)), zero, zero))
+            # The hand on the thigh: a 3D spring-damper (damping ratio 0.3
+            # on the arm mass).
+            fa = plant.AddFrame(FixedOffsetFrame(
+                f"hand_on_thigh_{side}", plant.GetBodyByName(f"thigh_{side}", human).body_frame(),
+                RigidTransform(p_hand - thigh.origin_W + F_hand / k_h)))
+            fc = plant.AddFrame(FixedOffsetFrame(
+                f"hand_{side}", plant.GetBodyByName(f"arm_{side}", human).body_frame(),
+                RigidTransform(p_hand - arm.origin_W)))
+            c_h = 0.6 * np.sqrt(k_h * arm.mass)
+            plant.AddForceElement(LinearBushingRollPitchYaw(
+                fa, fc, zero, zero, np.full(3, k_h), np.full(3, c_h)))
+    if effects.get("visceral_mass", {}).get("mass_kg", 0.0) > 0:
+        v = effects["visceral_mass"]
+        m, w = v["mass_kg"], 2 * np.pi * v["freq_hz"]
+        joint = plant.GetJointByName("visceral_z", human)
+        joint.set_default_damping_vector([2 * v["damping_ratio"] * m * w])
+        plant.AddForceElement(LinearBushingRollPitchYaw(
+            joint.frame_on_parent(), joint.frame_on_child(), zero, zero,
+            np.array([0.0, 0.0, m * w * w]), zero))
+    if effects.get("seat_cushion_dynamics", {}).get("mass_kg", 0.0) > 0:
+        c = effects["seat_cushion_dynamics"]
+        k = c["stiffness"]
+        # The cushion carries its own mass and the occupant's pan share.
+        m_eff = c["mass_kg"] + NOMINAL_LOAD_SHARE["pelvis_pan"] * body.total_mass \
+            + 2 * NOMINAL_LOAD_SHARE["thighs_pan"] * body.total_mass
+        joint = plant.GetJointByName("cushion_z", seat)
+        joint.set_default_damping_vector([2 * c["damping_ratio"] * np.sqrt(k * m_eff)])
+        # Preloaded so that under the nominal occupant the cushion surface
+        # sits where the rigid pan's does (the model's seat geometry is the
+        # loaded seat): the spring's free position is m_eff g / k higher.
+        lift = m_eff * 9.81 / k
+        rest = plant.AddFrame(FixedOffsetFrame(
+            "cushion_spring_rest", joint.frame_on_parent(), RigidTransform([0.0, 0.0, lift])))
+        plant.AddForceElement(LinearBushingRollPitchYaw(
+            rest, joint.frame_on_child(), zero, zero, np.array([0.0, 0.0, k]), zero))

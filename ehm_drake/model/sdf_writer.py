@@ -67,10 +67,13 @@ def _visual_shapes(name: str, body: Body):
     elif name == "upper_torso":
         c = 0.5 * (lm["T12L1"] + lm["C7T1"]) + np.array([0.035, 0, 0])
         shapes.append(("ellipsoid", c, (0.105, 0.175, 0.165), (0, 0, 0)))
-        for side in ("l", "r"):
-            shapes.append(capsule(lm[f"shoulder_{side}"], lm[f"elbow_{side}"], 0.045))
-            shapes.append(capsule(lm[f"elbow_{side}"], lm[f"wrist_{side}"], 0.037))
-            shapes.append(capsule(lm[f"wrist_{side}"], lm[f"hand_{side}"], 0.028))
+        if "arm_l" not in body.segments:  # arms lumped into the upper torso
+            for side in ("l", "r"):
+                shapes += _arm_shapes(lm, side, capsule)
+    elif name.startswith("arm_"):
+        shapes += _arm_shapes(lm, name[-1], capsule)
+    elif name == "viscera":
+        shapes.append(("ellipsoid", S, (0.07, 0.07, 0.07), (0, 0, 0)))
     elif name == "neck":
         shapes.append(capsule(lm["C7T1"], lm["C0C1"], 0.045))
     elif name == "head":
@@ -79,6 +82,12 @@ def _visual_shapes(name: str, body: Body):
         side = name[-1]
         shapes.append(capsule(lm[f"knee_{side}"], lm[f"ankle_{side}"], 0.045))
     return shapes
+
+
+def _arm_shapes(lm, side, capsule):
+    return [capsule(lm[f"shoulder_{side}"], lm[f"elbow_{side}"], 0.045),
+            capsule(lm[f"elbow_{side}"], lm[f"wrist_{side}"], 0.037),
+            capsule(lm[f"wrist_{side}"], lm[f"hand_{side}"], 0.028)]
 
 
 def human_sdf(body: Body) -> str:
@@ -166,6 +175,13 @@ def human_sdf(body: Body) -> str:
                 "    <axis2><xyz>0 1 0</xyz><limit><effort>0</effort></limit></axis2>",
                 "  </joint>",
             ]
+        elif seg.joint == "prismatic_z":
+            lines += [
+                f'  <joint name="{seg.joint_name}" type="prismatic">',
+                f"    <parent>{seg.parent}</parent><child>{name}</child>",
+                "    <axis><xyz>0 0 1</xyz><limit><effort>0</effort></limit></axis>",
+                "  </joint>",
+            ]
         elif seg.joint == "revolute":
             lines += [
                 f'  <joint name="{seg.joint_name}" type="revolute">',
@@ -209,8 +225,13 @@ def human_sdf(body: Body) -> str:
     return "\n".join(lines)
 
 
-def seat_sdf(body: Body) -> str:
-    """SDFormat text of the seat (pan, two backrest pads, floor) for `body`."""
+def seat_sdf(body: Body, cushion_mass_kg: float = 0.0) -> str:
+    """SDFormat text of the seat (pan, two backrest pads, floor) for `body`.
+
+    With `cushion_mass_kg` > 0 the pan is its own link ("cushion", that mass)
+    on a vertical prismatic joint to the seat frame (the
+    `seat_cushion_dynamics` effect; its spring and damper are added in
+    code)."""
     lines = [
         '<?xml version="1.0"?>',
         "<!--",
@@ -227,9 +248,11 @@ def seat_sdf(body: Body) -> str:
         f'<model name="{SEAT_MODEL_NAME}">',
         '  <link name="seat">',
     ]
+    cushion = []
     for name, (c, size) in body.seat.boxes.items():
         color = PAD_COLOR if "pad" in name else SEAT_COLOR
-        lines += [
+        target = cushion if (name == "pan" and cushion_mass_kg > 0) else lines
+        target += [
             f'    <collision name="{name}">',
             f"      <pose>{_pose(c)}</pose>",
             f"      <geometry><box><size>{_vec(size)}</size></box></geometry>",
@@ -252,10 +275,25 @@ def seat_sdf(body: Body) -> str:
         '  <joint name="seat_weld" type="fixed">',
         "    <parent>world</parent><child>seat</child>",
         "  </joint>",
-        "</model>",
-        "</sdf>",
-        "",
     ]
+    if cushion_mass_kg > 0:
+        m = cushion_mass_kg
+        Ixx = m * (0.5**2 + 0.05**2) / 12
+        lines += [
+            '  <link name="cushion">',
+            "    <!-- Seat cushion as its own mass (seat_cushion_dynamics effect). -->",
+            "    <inertial><pose>0.23 0 -0.025 0 0 0</pose>",
+            f"      <mass>{_f(m)}</mass><inertia><ixx>{_f(Ixx)}</ixx><iyy>{_f(Ixx)}</iyy>"
+            f"<izz>{_f(m * 0.5**2 / 6)}</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>",
+            "    </inertial>",
+            *[line.replace("    <", "    <", 1) for line in cushion],
+            "  </link>",
+            '  <joint name="cushion_z" type="prismatic">',
+            "    <parent>seat</parent><child>cushion</child>",
+            "    <axis><xyz>0 0 1</xyz><limit><effort>0</effort></limit></axis>",
+            "  </joint>",
+        ]
+    lines += ["</model>", "</sdf>", ""]
     return "\n".join(lines)
 
 

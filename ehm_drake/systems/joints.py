@@ -223,3 +223,56 @@ def JointPid_(T):
 
 
 JointPid = JointPid_[None]
+
+
+@TemplateSystem.define("CoContraction_", T_list=SCALARS)
+def CoContraction_(T):
+    class Impl(LeafSystem_[T]):
+        """Muscle co-contraction rising with the vibration level (the
+        `cocontraction` effect of the gap diagnosis): extra active joint
+        stiffness c * a_rms * kp on the trunk, neck and hip DoFs, where a_rms
+        is the running RMS of the seat acceleration (exponential average of
+        |a|^2 with time constant `tau_s`).
+
+        Inputs ``state``, ``seat_acceleration``; output
+        ``generalized_force``; discrete state: the running mean square.
+        Numeric parameter: [c (1/(m/s^2)), then kp per rotational DoF (0
+        where the effect does not act)]."""
+
+        def _construct(self, layout: JointLayout, c, kp, period: float, tau_s: float = 2.0,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._args = (layout, float(c), np.asarray(kp, float), float(period), float(tau_s))
+            self._layout = layout
+            self._alpha = float(period) / float(tau_s)
+            self._state_port = self.DeclareVectorInputPort("state", layout.nq + layout.nv)
+            self._a_port = self.DeclareVectorInputPort("seat_acceleration", 3)
+            self._param = self.DeclareNumericParameter(
+                BasicVector_[T](np.concatenate([[c], self._args[2]])))
+            self._ms = self.DeclareDiscreteState(1)
+            self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+            self.DeclareVectorOutputPort("generalized_force", layout.nv, self._calc)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, *other._args, converter=converter)
+
+        def _update(self, context, discrete_state):
+            a = self._a_port.Eval(context)
+            ms = context.get_discrete_state(self._ms).CopyToVector()
+            discrete_state.get_mutable_vector(self._ms).SetFromVector(
+                ms + self._alpha * (a @ a - ms))
+
+        def _calc(self, context, output):
+            L = self._layout
+            x = self._state_port.Eval(context)
+            g = context.get_numeric_parameter(self._param).CopyToVector()
+            ms = context.get_discrete_state(self._ms).CopyToVector()[0]
+            rms = np.sqrt(ms + 1e-30)
+            f = np.zeros(L.nv, dtype=x.dtype)
+            f[L.rot_v] = -g[0] * rms * g[1:] * x[L.rot_q]
+            output.SetFromVector(f)
+
+    return Impl
+
+
+CoContraction = CoContraction_[None]

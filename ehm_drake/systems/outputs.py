@@ -26,6 +26,14 @@ from .seat import SEAT_PART_NAMES
 SEGMENTS = ("pelvis", "trunk", "head", "knee_l", "knee_r")
 DOFS = ("x", "y", "z", "roll", "pitch", "yaw")
 CHANNEL_NAMES = tuple(f"{s}_{d}" for s in SEGMENTS for d in DOFS)
+#: The paper's validation channels per excitation direction (Desai et al.
+#: III-A): (segment, dof).
+PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis", "pitch"),
+                        ("trunk", "pitch"), ("head", "pitch")],
+                  "y": [("pelvis", "y"), ("trunk", "y"), ("head", "y"), ("trunk", "roll"),
+                        ("head", "roll"), ("trunk", "yaw"), ("head", "yaw")],
+                  "z": [("pelvis", "z"), ("trunk", "z"), ("head", "z"), ("trunk", "pitch"),
+                        ("head", "pitch")]}
 
 
 @TemplateSystem.define("BodyChannels_", T_list=SCALARS)

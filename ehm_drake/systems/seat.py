@@ -52,6 +52,10 @@ class RestraintPoint:
     p_BP: np.ndarray  # attachment point in the body frame
     p_SA: np.ndarray  # anchor in the seat frame (before slip)
     axes: np.ndarray  # (2, 3) tangential unit vectors in S
+    normal: np.ndarray  # (3,) outward normal of the seat part, in S
+    #: Seat face position minus the anchor along the normal (m): the
+    #: point's penetration is face_offset - (p - p_SA).normal.
+    face_offset: float
 
 
 def restraint_points(hp: HumanPlant) -> list[RestraintPoint]:
@@ -75,27 +79,76 @@ def restraint_points(hp: HumanPlant) -> list[RestraintPoint]:
             # to S in the reference posture: extreme point along -normal.
             p_BP = inspector.GetPoseInFrame(gid).translation() - semi * normal
             X_SB = plant.EvalBodyPoseInWorld(context, body)
-            points.append(RestraintPoint(name, pair, part, body.name(), p_BP,
-                                         X_SB.multiply(p_BP), axes))
+            p_SA = X_SB.multiply(p_BP)
+            c, size = hp.body.seat.boxes[part]
+            face = float(c @ normal + 0.5 * size @ np.abs(normal))
+            points.append(RestraintPoint(name, pair, part, body.name(), p_BP, p_SA, axes,
+                                         normal, face - float(p_SA @ normal)))
     return points
 
 
-def restraint_parameters(params: ModelParams, points) -> np.ndarray:
-    """Packed parameter vector: stiffness (n), damping (n), force limit (n)."""
+#: Blocks of the packed parameter vector of ShearRestraints (n values each).
+RESTRAINT_PARAMETERS = ("stiffness", "damping", "force_limit", "contact_gated",
+                        "normal_cubic_stiffness", "normal_reference", "normal_linear_stiffness",
+                        "normal_linear_damping", "friction_coefficient", "contact_stiffness")
+
+
+def restraint_parameters(params: ModelParams, points, gated_parts=(), cubic=None,
+                         friction=None) -> np.ndarray:
+    """Packed parameter vector (see RESTRAINT_PARAMETERS), per restraint point:
+
+    * shear stiffness (N/m), damping (N s/m) and force limit (N) of its pair;
+    * contact_gated: 1 where the restraint acts only in contact (points on
+      the parts in `gated_parts`);
+    * normal_cubic_stiffness (N/m^3, `cubic`, default 0) and
+      normal_reference (m, set at the static equilibrium): an extra normal
+      force k3 d^3 with d the compression beyond the reference;
+    * normal_linear_stiffness (N/m) and normal_linear_damping (N s/m): an
+      extra linear normal spring-damper about the reference, in contact
+      (0 in the model; the gap diagnosis' equivalent linearizations use it);
+    * friction_coefficient (`friction`, default 0 = unused): the shear
+      force is also limited to mu N, N = contact_stiffness x penetration
+      the point's current normal force (Coulomb friction at the cover);
+    * contact_stiffness: the pair's normal contact stiffness (N/m).
+    """
     r = [getattr(params.restraints, p.pair) for p in points]
+    c = [getattr(params.contact, p.pair) for p in points]
+    n = len(points)
+
+    def per_point(v):
+        return np.zeros(n) if v is None else np.broadcast_to(np.asarray(v, float), (n,))
+
     return np.concatenate([[x.stiffness for x in r], [x.damping for x in r],
-                           [x.force_limit for x in r]])
+                           [x.force_limit for x in r],
+                           [1.0 if p.part in gated_parts else 0.0 for p in points],
+                           per_point(cubic), np.zeros(n), np.zeros(n), np.zeros(n),
+                           per_point(friction), [x.stiffness for x in c]])
+
+
+def restraint_block(vector: np.ndarray, name: str) -> np.ndarray:
+    """View of block `name` of a packed restraint parameter vector."""
+    nb = len(RESTRAINT_PARAMETERS)
+    return np.asarray(vector).reshape(nb, -1)[RESTRAINT_PARAMETERS.index(name)]
 
 
 @TemplateSystem.define("ShearRestraints_", T_list=SCALARS)
 def ShearRestraints_(T):
     class Impl(LeafSystem_[T]):
-        """Input ``state``; outputs ``generalized_force`` (nv) and
-        ``seat_forces`` (restraint force on the body summed per seat part:
-        pan, floor, lower_pad, upper_pad, 3 each, N, in S).  Discrete state:
-        slip of each anchor along its two axes (m).  Numeric parameter
-        ``restraints``: stiffness, damping, force_limit, one value per
-        restraint each (both axes)."""
+        """The seat interface beyond Drake's contact: shear point restraints
+        (per tangential axis a spring-damper with a force limit and slip),
+        optionally acting only while the point is in contact (`contact_gated`:
+        a unilateral back support), optionally limited by Coulomb friction
+        mu N; and optional extra normal forces about a reference (static)
+        compression: cubic stiffening and a linear spring-damper.
+
+        Input ``state``; outputs ``generalized_force`` (nv),
+        ``point_forces`` (3 per point, N, in S), ``seat_forces`` (force on
+        the body summed per seat part: pan, floor, lower_pad, upper_pad, 3
+        each), ``normal_displacement`` (per point, m, along the seat
+        normal; negative = compressed) and ``deflection`` (2 per point, m,
+        elastic shear deflection beyond the slipped anchor).  Discrete
+        state: slip of each anchor along its two axes (m).  Numeric
+        parameter: the packed vector of `RESTRAINT_PARAMETERS`."""
 
         def _construct(self, plant, points, parameters, period, converter=None):
             LeafSystem_[T].__init__(self, converter)
@@ -103,6 +156,9 @@ def ShearRestraints_(T):
             self._points = self._args[1]
             n = len(points)
             self._n = n
+            if self._args[2].size != len(RESTRAINT_PARAMETERS) * n:
+                raise ValueError(f"restraint parameters: expected {len(RESTRAINT_PARAMETERS)} "
+                                 f"blocks of {n}, got {self._args[2].size} values")
             self._scratch = PlantScratch(plant, T)
             p = self._scratch.plant
             # Points grouped per body: (frame, 3xk points, rows in the list).
@@ -114,16 +170,19 @@ def ShearRestraints_(T):
                             for b, rows in groups.items()]
             self._order = np.concatenate([rows for _, _, rows in self._groups])
             self._p_SA = np.array([pt.p_SA for pt in points])
-            # Projection of the stacked point vectors (3n) onto the axes (2n).
+            # Projections of the stacked point vectors (3n) onto the tangential
+            # axes (2n) and the normals (n).
             A = np.zeros((2 * n, 3 * n))
+            Nm = np.zeros((n, 3 * n))
             for i, pt in enumerate(points):
                 A[2 * i:2 * i + 2, 3 * i:3 * i + 3] = pt.axes
-            self._A = A
-            # The same projection for points stacked body by body, and the
-            # anchor term: A p_all - A p_SA.
+                Nm[i, 3 * i:3 * i + 3] = pt.normal
+            self._A, self._N = A, Nm
+            # The same for points stacked body by body, and the anchor terms.
             perm = (3 * self._order[:, None] + np.arange(3)).reshape(-1)
-            self._A_grouped = A[:, perm]
-            self._a0 = A @ self._p_SA.reshape(-1)
+            self._A_grouped, self._N_grouped = A[:, perm], Nm[:, perm]
+            self._a0, self._n0 = A @ self._p_SA.reshape(-1), Nm @ self._p_SA.reshape(-1)
+            self._face = np.array([pt.face_offset for pt in points])
             self._part_of = np.array([SEAT_PART_NAMES.index(pt.part) for pt in points])
             # Sum of point forces per seat part: (12, 3n).
             P = np.zeros((3 * len(SEAT_PART_NAMES), 3 * n))
@@ -138,7 +197,7 @@ def ShearRestraints_(T):
             self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
             self._kin = self.DeclareCacheEntry(
                 "restraint kinematics",
-                ValueProducer(allocate=lambda: AbstractValue.Make((None, None, None)),
+                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 5),
                               calc=self._calc_kinematics),
                 prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())},
             )
@@ -156,6 +215,8 @@ def ShearRestraints_(T):
             self.DeclareVectorOutputPort("generalized_force", self._nv, self._calc_force)
             self.DeclareVectorOutputPort("seat_forces", 3 * len(SEAT_PART_NAMES),
                                          self._calc_seat_forces)
+            self.DeclareVectorOutputPort("normal_displacement", n, self._calc_normal)
+            self.DeclareVectorOutputPort("deflection", 2 * n, self._calc_deflection)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, *other._args, converter=converter)
@@ -177,9 +238,12 @@ def ShearRestraints_(T):
             (2n, m), before slip."""
             return self._kin.Eval(context)[1]
 
+        def normal_displacement(self, context) -> np.ndarray:
+            return self._kin.Eval(context)[3]
+
         def _calc_kinematics(self, context, value):
-            """Stacked point Jacobian J (3n x nv), and the deflection and
-            velocity along the axes (2n each), before slip."""
+            """Stacked point Jacobian J (3n x nv); displacement and velocity
+            along the tangential axes (2n each) and the normals (n each)."""
             x = self._state_port.Eval(context)
             ctx = self._scratch.set_state(x)
             p = self._scratch.plant
@@ -189,42 +253,92 @@ def ShearRestraints_(T):
                                   for frame, P_B, _ in self._groups])
             J = np.vstack([p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, world, world)
                            for frame, P_B, _ in self._groups])
-            # Rows are grouped per body; the projection matrix is permuted to
-            # match once at construction (self._A_grouped).
-            value.set_value((J, self._A_grouped @ pos - self._a0,
-                             self._A_grouped @ (J @ x[self._nq:])))
+            vel = J @ x[self._nq:]
+            # Rows are grouped per body; the projection matrices are permuted
+            # to match once at construction.
+            value.set_value((J, self._A_grouped @ pos - self._a0, self._A_grouped @ vel,
+                             self._N_grouped @ pos - self._n0, self._N_grouped @ vel))
 
         def _calc_axis_params(self, context, value):
-            g = context.get_numeric_parameter(self._param).CopyToVector().reshape(3, -1)
-            k, c, fmax = g[:, self._axis_of]
-            limit = fmax / np.where(k > 0, k, 1.0)
-            value.set_value((k, c, fmax, -fmax, limit, -limit))
+            g = context.get_numeric_parameter(self._param).CopyToVector().reshape(
+                len(RESTRAINT_PARAMETERS), -1)
+            k, c, fmax = g[:3, self._axis_of]
+            gated = g[3] > 0.5
+            mu = g[8]
+            value.set_value({
+                "k": k, "c": c, "fmax": fmax, "gated": gated, "any_gated": bool(gated.any()),
+                "k3": g[4], "ref": g[5], "any_cubic": bool(np.any(g[4] != 0)),
+                "k_lin": g[6], "c_lin": g[7], "any_linear": bool(np.any(g[6:8] != 0)),
+                "mu": mu[self._axis_of], "k_contact": g[9][self._axis_of],
+                "any_friction": bool(np.any(mu > 0)),
+                "k_safe": np.where(k > 0, k, 1.0)})
 
-        def _axis_forces(self, context):
-            """Restraint force along each axis (2n), limited."""
-            _, pos, vel = self._kin.Eval(context)
-            k, c, fmax, neg_fmax, _, _ = self._axis_params.Eval(context)
+        def _in_contact(self, pos_n):
+            """True where the point penetrates its seat part."""
+            return np.asarray((self._face - pos_n) > 0, dtype=bool)
+
+        def _limits(self, prm, pos_n):
+            """Force limit per axis: the restraint's own, and mu N with
+            friction (N: the contact's elastic normal force at the point)."""
+            fmax = prm["fmax"]
+            if prm["any_friction"]:
+                pen = np.repeat(np.maximum(self._face - pos_n, 0.0), 2)
+                fmu = prm["mu"] * prm["k_contact"] * pen
+                fmax = np.where(prm["mu"] > 0, np.minimum(fmax, fmu), fmax)
+            return fmax
+
+        def _forces(self, context):
+            """(tangential force per axis (2n), normal force per point (n))."""
+            _, pos, vel, pos_n, vel_n = self._kin.Eval(context)
+            prm = self._axis_params.Eval(context)
             slip = context.get_discrete_state(self._slip).CopyToVector()
-            return np.minimum(np.maximum(-k * (pos - slip) - c * vel, neg_fmax), fmax)
+            fmax = self._limits(prm, pos_n)
+            f = np.minimum(np.maximum(-prm["k"] * (pos - slip) - prm["c"] * vel, -fmax), fmax)
+            contact = None
+            if prm["any_gated"]:
+                contact = np.where(prm["gated"], self._in_contact(pos_n), True)
+                f = f * np.repeat(contact, 2)
+            fn = 0.0 * pos_n
+            if prm["any_cubic"] or prm["any_linear"]:
+                # About the reference compression, in contact only.
+                d = prm["ref"] - pos_n  # extra compression (m)
+                touching = self._in_contact(pos_n)
+                fn = (prm["k3"] * d * d * d + prm["k_lin"] * d - prm["c_lin"] * vel_n) * touching
+            return f, fn
 
         def _calc_point_forces(self, context, output):
-            output.SetFromVector(self._A.T @ self._axis_forces(context))
+            f, fn = self._forces(context)
+            output.SetFromVector(self._A.T @ f + self._N.T @ fn)
 
         def _calc_force(self, context, output):
             J = self._kin.Eval(context)[0]
-            output.SetFromVector(J.T @ (self._A_grouped.T @ self._axis_forces(context)))
+            f, fn = self._forces(context)
+            output.SetFromVector(J.T @ (self._A_grouped.T @ f + self._N_grouped.T @ fn))
 
         def _calc_seat_forces(self, context, output):
             output.SetFromVector(self._sum_parts @ self._force_port.Eval(context))
 
+        def _calc_normal(self, context, output):
+            output.SetFromVector(self._kin.Eval(context)[3])
+
+        def _calc_deflection(self, context, output):
+            pos = self._kin.Eval(context)[1]
+            output.SetFromVector(pos - context.get_discrete_state(self._slip).CopyToVector())
+
         def _update(self, context, discrete_state):
-            _, pos, _ = self._kin.Eval(context)
-            *_, limit, neg_limit = self._axis_params.Eval(context)
+            _, pos, _, pos_n, _ = self._kin.Eval(context)
+            prm = self._axis_params.Eval(context)
             slip = context.get_discrete_state(self._slip).CopyToVector()
             # The elastic deflection may not exceed fmax/k: the anchor slides.
+            limit = self._limits(prm, pos_n) / prm["k_safe"]
             delta = pos - slip
-            discrete_state.get_mutable_vector(self._slip).SetFromVector(
-                slip + (delta - np.minimum(np.maximum(delta, neg_limit), limit)))
+            new = slip + (delta - np.minimum(np.maximum(delta, -limit), limit))
+            if prm["any_gated"]:
+                # Out of contact the anchor follows the point: it re-attaches
+                # unloaded where the body touches again.
+                free = np.repeat(prm["gated"] & ~self._in_contact(pos_n), 2)
+                new = np.where(free, pos, new)
+            discrete_state.get_mutable_vector(self._slip).SetFromVector(new)
 
     return Impl
 
@@ -237,15 +351,16 @@ def SeatInertialLoad_(T):
     class Impl(LeafSystem_[T]):
         """Inputs ``state`` and ``seat_acceleration`` (3, m/s^2, in S);
         output ``generalized_force`` = -M J_com^T a_S: the inertial force
-        -m_i a_S at every body's centre of mass, the seat frame being
-        accelerated by a_S."""
+        -m_i a_S at the centre of mass of every body of the given model
+        instance(s), the seat frame being accelerated by a_S."""
 
-        def _construct(self, plant, model_instance, converter=None):
+        def _construct(self, plant, model_instances, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._args = (plant, model_instance)
+            self._args = (plant, model_instances)
             self._scratch = PlantScratch(plant, T)
             p = self._scratch.plant
-            self._instances = [model_instance]
+            self._instances = (list(model_instances) if isinstance(model_instances, (list, tuple))
+                               else [model_instances])
             self._mass = p.CalcTotalMass(self._scratch.context, self._instances)
             self._world = p.world_frame()
             self._nv = p.num_velocities()

@@ -1,0 +1,261 @@
+"""Lab-like synthetic data: the nonlinear time-domain model with hidden
+effects, a simulated subject and a lab's measurement chain.
+
+What a lab hands over (and nothing else) goes to the data folder:
+
+* ``frf.csv``: seat-to-body transmissibility of every test (30 channels:
+  pelvis, trunk, head, knees x 6 DoF), H1 estimates with their coherence,
+  level and number of averages;
+* ``<direction>_<level>/timeseries.csv``: the recorded seat acceleration and
+  body motion of each test (steady part; metadata in the header);
+* ``tests.json``: directions, levels and the processing used.
+
+The truth (effects and their strengths, the subject's parameters) goes only
+to the key file.
+
+The subject.  The base parameters of the identification's default set (20
+stiffnesses, dampings and gains, `fit_parameters.yaml`) are each scaled by
+a seeded factor uniform in [1 - spread, 1 + spread] (spread 0.15: inter-
+subject variability of seated-body resonance frequencies and peak gains is
+10-20%).
+
+The measurement chain.  Random seat excitation (flat 0.1-12 Hz, seeded) per
+direction and level; body motion by motion capture: white noise of 0.1 mm
+(translations) and 0.05 deg (rotations) RMS on every sample (optical
+marker clusters); seat accelerometer noise 0.005 m/s^2 RMS; H1 estimation
+with 10 s Hann segments, 50% overlap (0.1 Hz resolution), exactly the
+`ehm-drake transmissibility` processing.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.dataio import FrfData, TimeSeriesData
+from ..analysis.spectral import transmissibility
+from ..identification.parameters import apply_scales, representative, resolve_free
+from ..model.anthropometry import REFERENCE
+from ..parallel import run_jobs
+from ..params import ModelParams, params_from_dict
+from .effects import EFFECTS, effect_values
+
+DEFAULT_LEVELS = (0.3, 0.6)
+DEFAULT_DURATION_S = 60.0
+SEGMENT_S = 10.0
+SUBJECT_SPREAD = 0.15
+#: Motion-capture and seat accelerometer noise (RMS per sample).
+NOISE_TRANSLATION_M = 1.0e-4
+NOISE_ROTATION_DEG = 0.05
+NOISE_SEAT_MS2 = 0.005
+
+
+class SynthError(ValueError):
+    """Bad synth request (unknown effect, bad strength, occupied output)."""
+
+
+@dataclass
+class SynthSpec:
+    """What to synthesize."""
+
+    effects: dict  # name -> strength in [0, 1]
+    seed: int
+    levels: tuple = DEFAULT_LEVELS
+    directions: str = "xyz"
+    duration_s: float = DEFAULT_DURATION_S
+    spread: float = SUBJECT_SPREAD
+
+    def validate(self) -> None:
+        for name, s in self.effects.items():
+            if name not in EFFECTS:
+                raise SynthError(f"unknown effect {name!r}; choose from "
+                                 f"{', '.join(EFFECTS)} or 'none'")
+            if not (isinstance(s, (int, float)) and math.isfinite(s) and 0.0 <= s <= 1.0):
+                raise SynthError(f"strength of {name} must be a fraction in [0, 1], got {s!r}")
+        if not self.levels:
+            raise SynthError("give at least one level")
+        for lv in self.levels:
+            if not (math.isfinite(lv) and 0.01 <= lv <= 5.0):
+                raise SynthError(f"level {lv} m/s^2 outside 0.01-5 m/s^2 (units are m/s^2 RMS)")
+        if len(set(self.levels)) != len(self.levels):
+            raise SynthError(f"duplicate levels in {self.levels}")
+        if not self.directions or any(d not in "xyz" for d in self.directions) or \
+                len(set(self.directions)) != len(self.directions):
+            raise SynthError(f"directions must be distinct letters of x, y, z, got "
+                             f"{self.directions!r}")
+        if not (math.isfinite(self.duration_s) and self.duration_s >= 3 * SEGMENT_S):
+            raise SynthError(f"duration must be >= {3 * SEGMENT_S:g} s (3 segments of "
+                             f"{SEGMENT_S:g} s), got {self.duration_s}")
+        if not 0.0 <= self.spread < 0.5:
+            raise SynthError(f"subject spread must be in [0, 0.5), got {self.spread}")
+
+    def effect_values(self) -> dict:
+        return {n: effect_values(n, s) for n, s in self.effects.items() if s > 0}
+
+
+def subject_parameters(params: ModelParams, seed: int, spread: float = SUBJECT_SPREAD):
+    """The simulated subject: default-set base parameters scaled by seeded
+    factors uniform in [1 - spread, 1 + spread].  Returns (params, factors)."""
+    free = resolve_free("default")
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 1]))
+    factors = 1.0 + rng.uniform(-spread, spread, len(free))
+    return apply_scales(params, free, factors), {f.name: float(s) for f, s in
+                                                  zip(free, factors, strict=True)}
+
+
+def _test_seeds(seed: int, n: int) -> list[int]:
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence([seed, 2]).spawn(n)]
+
+
+def level_label(level: float) -> str:
+    return f"{level:g}"
+
+
+def _run_test(args):
+    """One lab test: simulate, add sensor noise, H1.  Returns (FrfData,
+    TimeSeriesData, wall seconds, real-time factor)."""
+    from ..signals import make_seat_signal
+    from ..simulation import vibrate
+
+    params_dict, effects, settled, direction, level, duration, seed = args
+    params = params_from_dict(params_dict)
+    s = params.simulation
+    t0 = time.perf_counter()
+    signal = make_seat_signal("random", direction, level, duration + s.onset_time_s, seed,
+                              s.time_step_s, s.settle_time_s, s.onset_time_s)
+    result = vibrate(params, settled, signal, REFERENCE, effects=effects)
+    steady = result.after(signal.steady_start)
+    ts = steady.to_timeseries()
+    rng = np.random.default_rng(np.random.SeedSequence([seed, 3]))
+    channels = {}
+    for name, x in ts.channels.items():
+        rot = name.rsplit("_", 1)[-1] in ("roll", "pitch", "yaw")
+        sd = NOISE_ROTATION_DEG if rot else NOISE_TRANSLATION_M
+        channels[name] = x + sd * rng.standard_normal(len(x))
+    seat = ts.seat_acc + NOISE_SEAT_MS2 * rng.standard_normal(ts.seat_acc.shape)
+    # The level is the nominal RMS of the test (what a lab reports).
+    ts = TimeSeriesData(ts.t - ts.t[0], seat, channels,
+                        {"direction": direction, "level_rms": float(level)})
+    nperseg = int(round(SEGMENT_S * ts.fs))
+    frf = transmissibility(ts, directions=direction, nperseg=nperseg)
+    return frf, ts, time.perf_counter() - t0, result.meta.get("real_time_factor", float("nan"))
+
+
+@dataclass
+class SynthResult:
+    out_dir: Path
+    key_path: Path
+    frf: FrfData
+    key: dict
+    wall_s: float
+    tests: list = field(default_factory=list)
+
+
+def _check_outputs(out_dir: Path, key_path: Path) -> None:
+    out_dir, key_path = Path(out_dir).resolve(), Path(key_path).resolve()
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        raise SynthError(f"{out_dir} exists and is not an empty folder; give a new --out "
+                         "(nothing is overwritten)")
+    if key_path.exists():
+        raise SynthError(f"key file {key_path} exists; give a new --key (nothing is "
+                         "overwritten)")
+    if out_dir == key_path or out_dir in key_path.parents:
+        raise SynthError("the key file must not be inside the data folder: the data must "
+                         "hold only what a lab hands over")
+
+
+def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = None,
+               workers: int | None = None, progress: bool = True) -> SynthResult:
+    """Simulate the lab tests of `spec` and write the data folder and key."""
+    from ..params import load_params
+    from ..simulation import settle
+
+    spec.validate()
+    out_dir, key_path = Path(out_dir), Path(key_path)
+    _check_outputs(out_dir, key_path)
+    t0 = time.perf_counter()
+    base = params if params is not None else load_params()
+    subject, factors = subject_parameters(base, spec.seed, spec.spread)
+    effects = spec.effect_values()
+    if progress:
+        desc = ", ".join(f"{n} ({s:.2f})" for n, s in spec.effects.items() if s > 0) or "none"
+        sys.stderr.write(f"synth: subject seed {spec.seed}, effects: {desc}; settling\n")
+    settled = settle(subject, REFERENCE, effects=effects)
+    tests = [(d, lv) for d in spec.directions for lv in spec.levels]
+    seeds = _test_seeds(spec.seed, len(tests))
+    jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
+            for (d, lv), sd in zip(tests, seeds, strict=True)]
+
+    def report(done, total, i, result):
+        if progress:
+            wall = time.perf_counter() - t0
+            d, lv = tests[i]
+            sys.stderr.write(f"synth: test {d} @ {level_label(lv)} m/s^2 done ({done}/{total}, "
+                             f"real-time factor {result[3]:.2f}), eta "
+                             f"{wall / done * (total - done):.0f} s\n")
+
+    results = run_jobs([(_run_test, j) for j in jobs], workers, report)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    frf = FrfData.concat([r[0] for r in results])
+    frf.to_csv(out_dir / "frf.csv")
+    test_list = []
+    for (d, lv), r in zip(tests, results, strict=True):
+        sub = out_dir / f"{d}_{level_label(lv)}"
+        sub.mkdir()
+        r[1].to_csv(sub / "timeseries.csv")
+        test_list.append({"direction": d, "level_rms": lv,
+                          "timeseries": f"{sub.name}/timeseries.csv",
+                          "duration_s": float(r[1].duration),
+                          "n_averages": int(r[0].n_averages[0])})
+    (out_dir / "tests.json").write_text(json.dumps({
+        "directions": spec.directions,
+        "levels_rms": list(spec.levels),
+        "tests": test_list,
+        "processing": {"estimator": "H1", "segment_s": SEGMENT_S, "overlap": 0.5,
+                       "window": "hann", "band_hz": [0.1, 12.0],
+                       "excitation": "random, flat 0.1-12 Hz"},
+        "channel_units": {"translation": "m/m", "rotation": "deg/m"},
+    }, indent=2) + "\n")
+    key = {
+        "seed": spec.seed,
+        "effects": {n: {"strength": float(s), "values": effect_values(n, s)}
+                    for n, s in spec.effects.items() if s > 0},
+        "subject_factors": factors,
+        "subject_values": {n: representative(subject, f) for n, f in
+                           ((f.name, f) for f in resolve_free("default"))},
+        "levels_rms": list(spec.levels),
+        "directions": spec.directions,
+        "duration_s": spec.duration_s,
+        "settle_summary": settled.summary,
+    }
+    key_path.parent.mkdir(parents=True, exist_ok=True)
+    key_path.write_text(json.dumps(key, indent=2, default=float) + "\n")
+    wall = time.perf_counter() - t0
+    if progress:
+        sys.stderr.write(f"synth: wrote {out_dir} ({len(frf)} FRF rows) and key {key_path} "
+                         f"in {wall:.0f} s\n")
+    return SynthResult(out_dir, key_path, frf, key, wall, test_list)
+
+
+def parse_effects_arg(text: str, strength: float | None) -> dict:
+    """`--effect a,b` (or `none`) and `--strength S` -> {name: strength}."""
+    names = [t.strip() for t in (text or "").split(",") if t.strip()]
+    if not names:
+        raise SynthError("--effect needs a name (or 'none')")
+    if names == ["none"]:
+        return {}
+    if "none" in names:
+        raise SynthError("'none' cannot be combined with other effects")
+    s = 1.0 if strength is None else strength
+    out = {}
+    for n in names:
+        if n in out:
+            raise SynthError(f"effect {n} given twice")
+        out[n] = s
+    return out
