@@ -8,6 +8,9 @@ fit               identify parameters from measured transmissibility
 sweep             batch runs (parameters, anthropometry, seats, Monte Carlo)
 transmissibility  estimate frf.csv (+ figures) from a simulation or lab folder
 comfort           ISO 2631-1 comfort metrics of a simulation or lab folder
+diagnose          sim-to-real gap: where it lies, which unmodelled effect, how much it shrinks
+synth             lab-like data from the model with hidden effects (truth to a key file)
+blind             blind check of diagnose on synthetic trials
 
 Errors in the input (parameter files, arguments, data) end the program with
 a one-line message and exit status 2; a simulation that blows up, with
@@ -26,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import VARIANTS, ParameterError, load_params
 from .signals import KINDS, PAPER_RMS, SignalError
@@ -493,6 +497,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_comfort)
 
     add_sweep_arguments(sub)
+    add_gap_arguments(sub)
     return parser
 
 

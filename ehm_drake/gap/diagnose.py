@@ -33,6 +33,7 @@ Procedure (`diagnose`):
 from __future__ import annotations
 
 import copy
+import fcntl
 import hashlib
 import json
 import math
@@ -56,6 +57,7 @@ from .family import build_families, linearize_cut, static_penetrations
 from .localize import (
     BANDS,
     Rows,
+    cell_keys,
     chi2_rows,
     gap_value,
     localize,
@@ -202,8 +204,30 @@ def load_families(params: ModelParams, measures: BodyMeasures, effect_names, bas
     """The linear families (base + grid effects) and the static separation
     slope, from the cache or computed (and cached)."""
     specs = family_specs(effect_names)
-    out, todo = {}, []
     cdir = cache_dir() / "families"
+    if not use_cache:
+        return _load_or_build(specs, cdir, params, measures, base_names, workers, progress,
+                              False)
+    # One builder at a time: concurrent diagnoses (a batch, a blind run, parallel
+    # tests) wait for the first to fill the cache instead of repeating its work.
+    try:
+        cdir.mkdir(parents=True, exist_ok=True)
+        lock = open(cdir / ".lock", "w")  # noqa: SIM115 (held across the build)
+    except OSError:
+        return _load_or_build(specs, cdir, params, measures, base_names, workers, progress,
+                              True)
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            return _load_or_build(specs, cdir, params, measures, base_names, workers,
+                                  progress, True)
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def _load_or_build(specs, cdir, params, measures, base_names, workers, progress,
+                   use_cache) -> dict:
+    out, todo = {}, []
     for sp in specs:
         path = cdir / f"{_family_key(params, measures, base_names, sp)}.pkl"
         if use_cache and path.is_file():
@@ -374,16 +398,16 @@ def _emit(progress, msg: str) -> None:
         sys.stderr.flush()
 
 
-def _heldout_gap(chi: np.ndarray) -> float:
-    ok = np.isfinite(chi)
-    return gap_value(chi[ok])
+def _heldout_gap(chi: np.ndarray, keys: np.ndarray) -> float:
+    return gap_value(chi, keys)
 
 
-def _ranking_entry(name, res, base, n_base, n_rows, base_names) -> dict:
+def _ranking_entry(name, res, base, n_base, n_rows, base_names, keys) -> dict:
     cand = Candidate(() if name == "none" else tuple(name.split("+")))
     theta = np.array(res["theta"])
-    g_train0, g_train = gap_value(base["chi_all"]), gap_value(res["chi_all"])
-    g_held0, g_held = _heldout_gap(base["chi_heldout"]), _heldout_gap(res["chi_heldout"])
+    g_train0, g_train = gap_value(base["chi_all"], keys), gap_value(res["chi_all"], keys)
+    g_held0 = _heldout_gap(base["chi_heldout"], keys)
+    g_held = _heldout_gap(res["chi_heldout"], keys)
     k = len(cand.params)
     delta_bic = float(np.nansum(res["chi_heldout"]) - np.nansum(base["chi_heldout"])
                       + k * math.log(max(2 * n_rows, 2)))
@@ -541,7 +565,9 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     base = results["none"]
     cells_before = localize(rows, base["chi_all"])
     significant = [c for c in cells_before if c["significant"]]
-    ranking = [_ranking_entry(n, results[n], base, nb, len(rows), base_names) for n in names]
+    keys = cell_keys(rows)
+    ranking = [_ranking_entry(n, results[n], base, nb, len(rows), base_names, keys)
+               for n in names]
     ranking.sort(key=lambda r: (r["delta_bic"], -r["gap_reduction_heldout"]))
     evidence = level_evidence(rows)
     nonlinear_evidence = any(e["significant"] for e in evidence.values())
@@ -588,7 +614,8 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     for c in cells_before:
         a = after_map[(c["direction"], c["segment"], c["dof"], c["f_lo_hz"])]
         localization.append({**c, "gap_after": a["gap"], "significant_after": a["significant"]})
-    g = {k: {"train": gap_value(r["chi_all"]), "heldout": _heldout_gap(r["chi_heldout"])}
+    g = {k: {"train": gap_value(r["chi_all"], keys),
+             "heldout": _heldout_gap(r["chi_heldout"], keys)}
          for k, r in (("before", base), ("after", after_res))}
     report = {
         "verdict": verdict,
@@ -598,7 +625,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
         "localization": localization,
         "gap_before": g["before"],
         "gap_after": g["after"],
-        "gap_given_model": gap_value(chi2_rows(rows, _given_prediction(state))),
+        "gap_given_model": gap_value(chi2_rows(rows, _given_prediction(state)), keys),
         "significant_cells": len(significant),
         "ambiguous_with": ambiguous_with,
         "separating_experiment": experiment,

@@ -18,8 +18,9 @@ sigma^2 (two degrees of freedom per row).  A cell is significant when
 chi^2 exceeds the chi^2 quantile at p = 0.01 divided by the number of cells
 (Bonferroni), i.e. noise alone flags a cell in fewer than 1% of datasets;
 its share is its excess chi^2 - dof over the total excess.  The scalar gap
-of a set of rows is the excess per degree of freedom, max(chi^2/dof - 1, 0)
-(0 = within the measurement noise).
+of a set of rows is the total excess over the degrees of freedom,
+sum over cells of max(chi^2 - dof, 0) / sum of dof (0 = every cell within
+the measurement noise; see `gap_value`).
 """
 
 from __future__ import annotations
@@ -175,11 +176,23 @@ def chi2_rows(rows: Rows, H_model: np.ndarray) -> np.ndarray:
     return np.abs(H_model - rows.H) ** 2 / (rows.rel_var * mag2 + 1e-300)
 
 
-def gap_value(chi: np.ndarray) -> float:
-    """Excess chi^2 per degree of freedom (0 = within the noise)."""
-    if len(chi) == 0:
+def gap_value(chi: np.ndarray, keys: np.ndarray | None = None) -> float:
+    """The scalar gap of a set of rows: the excess chi^2 of every cell
+    (direction x channel x band), floored at 0, summed and divided by the
+    degrees of freedom, sum_c max(chi2_c - dof_c, 0) / sum_c dof_c (0 = every
+    cell within the noise).  Cell-wise, so a few cells far outside the noise
+    are not averaged away by many cells inside it.  Without `keys`, the rows
+    form one cell.  Rows with a NaN chi^2 (not evaluated) are left out."""
+    chi = np.asarray(chi, float)
+    ok = np.isfinite(chi)
+    if not np.any(ok):
         return 0.0
-    return max(float(np.sum(chi) / (2.0 * len(chi)) - 1.0), 0.0)
+    if keys is None:
+        return max(float(np.sum(chi[ok]) / (2.0 * ok.sum()) - 1.0), 0.0)
+    _, inv = np.unique(np.asarray(keys)[ok], return_inverse=True)
+    sums = np.bincount(inv, weights=chi[ok])
+    dof = 2.0 * np.bincount(inv)
+    return float(np.maximum(sums - dof, 0.0).sum() / dof.sum())
 
 
 def cell_keys(rows: Rows) -> np.ndarray:

@@ -1,0 +1,168 @@
+"""The gap-diagnosis commands of the CLI: ``diagnose``, ``synth`` and
+``blind`` (argument parsing and printing only; the work is in
+`diagnose`, `synth` and `blind`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .effects import EFFECT_NAMES
+
+
+def _csv_floats(name):
+    def parse(text):
+        try:
+            vals = tuple(float(t) for t in text.split(",") if t.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"{name} must be comma-separated numbers, got {text!r}") from None
+        if not vals:
+            raise argparse.ArgumentTypeError(f"{name} is empty")
+        return vals
+    return parse
+
+
+def _effect_list(text):
+    names = tuple(t.strip() for t in text.split(",") if t.strip())
+    bad = [n for n in names if n not in EFFECT_NAMES]
+    if bad or not names:
+        raise argparse.ArgumentTypeError(
+            f"unknown effect(s) {', '.join(bad) or repr(text)}; choose from "
+            f"{', '.join(EFFECT_NAMES)}")
+    return names
+
+
+def _int_at_least(lo):
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < lo:
+            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {v}")
+        return v
+    return parse
+
+
+def add_gap_arguments(sub) -> None:
+    p = sub.add_parser("diagnose", help="sim-to-real gap: where, which unmodelled effect, how "
+                       "much it removes")
+    p.add_argument("data", metavar="DATA", help="lab data: a folder with frf.csv (and "
+                   "tests.json, <direction>_<level>/timeseries.csv), a timeseries.csv folder "
+                   "or an frf.csv")
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--params", metavar="FILE", help="model parameters (default or a fit's "
+                   "params.yaml)")
+    p.add_argument("--effects", type=_effect_list, metavar="A,B,...",
+                   help=f"candidate effects (default all: {', '.join(EFFECT_NAMES)})")
+    p.add_argument("--workers", type=_int_at_least(1), default=None,
+                   help="parallel processes (default: all cores)")
+    p.add_argument("--no-cache", action="store_true", help="recompute the linear families "
+                   "instead of reusing $EHM_DRAKE_CACHE (default ~/.cache/ehm_drake)")
+    p.add_argument("--force", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_diagnose)
+
+    p = sub.add_parser("synth", help="lab-like data from the nonlinear model with hidden "
+                       "effects (the truth goes to --key only)")
+    p.add_argument("--effect", required=True, metavar="NAME[,NAME]",
+                   help=f"effect(s) to hide, or none ({', '.join(EFFECT_NAMES)})")
+    p.add_argument("--strength", type=float, default=None, metavar="S",
+                   help="fraction [0, 1] of the effect's plausible range (default 1)")
+    p.add_argument("--seed", type=_int_at_least(0), required=True, metavar="N")
+    p.add_argument("--levels", type=_csv_floats("--levels"), default=None, metavar="A,B",
+                   help="seat acceleration RMS per test, m/s^2 (default 0.3,0.6)")
+    p.add_argument("--directions", default="x,y,z", metavar="x,y,z")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="record length per test, s (default 60)")
+    p.add_argument("--workers", type=_int_at_least(1), default=None)
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--key", required=True, metavar="KEYFILE")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_synth)
+
+    p = sub.add_parser("blind", help="blind check of diagnose on synthetic trials with "
+                       "hidden effects")
+    p.add_argument("--trials", type=_int_at_least(1), required=True, metavar="N")
+    p.add_argument("--seed", type=_int_at_least(0), required=True, metavar="S")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (re-running "
+                   "with the same settings resumes)")
+    p.add_argument("--hidden", type=_effect_list, default=None, metavar="A,B,...",
+                   help="effects the trials may hide (default all)")
+    p.add_argument("--effects", type=_effect_list, default=None, metavar="A,B,...",
+                   help="candidates diagnose may propose (default all)")
+    p.add_argument("--levels", type=_csv_floats("--levels"), default=None, metavar="A,B")
+    p.add_argument("--directions", default="x,y,z", metavar="x,y,z")
+    p.add_argument("--duration", type=float, default=None, metavar="S")
+    p.add_argument("--p-none", type=float, default=0.15, help="fraction of no-effect trials")
+    p.add_argument("--p-two", type=float, default=0.10, help="fraction of two-effect trials")
+    p.add_argument("--workers", type=_int_at_least(1), default=None)
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_blind)
+
+
+def _directions(text: str) -> str:
+    return "".join(t.strip() for t in text.split(",") if t.strip())
+
+
+def cmd_diagnose(args) -> int:
+    from ..cli import prepare_output_dir
+    from ..params import load_params
+    from .diagnose import diagnose
+    from .report import write_report
+
+    params = load_params(args.params)
+    out = prepare_output_dir(args.out, args.force)
+    diag = diagnose(args.data, params, args.effects, workers=args.workers,
+                    progress=not args.quiet, use_cache=not args.no_cache)
+    files = write_report(diag, out, {"params_file": args.params})
+    r = diag.report
+    print(f"verdict: {r['verdict']}" + (f" ({r['best_effect']})" if r["best_effect"] else ""))
+    print(f"  {r['explanation']}")
+    print(f"  gap before: train {r['gap_before']['train']:.3g}, held-out "
+          f"{r['gap_before']['heldout']:.3g}; after: train {r['gap_after']['train']:.3g}, "
+          f"held-out {r['gap_after']['heldout']:.3g}")
+    for e in r["ranking"][:3]:
+        print(f"  {e['effect']:24s} dBIC {e['delta_bic']:10.1f}  held-out reduction "
+              f"{100 * e['gap_reduction_heldout']:5.1f}%")
+    sig = [c for c in r["localization"] if c["significant"]]
+    for c in sig[:5]:
+        print(f"  gap in {c['direction']}: {c['segment']} {c['dof']} {c['f_lo_hz']:g}-"
+              f"{c['f_hi_hz']:g} Hz (share {100 * c['share']:.0f}%)")
+    if r.get("separating_experiment"):
+        print(f"  to separate: {r['separating_experiment']['text']}")
+    print(f"-> {out}: " + ", ".join(files))
+    return 0
+
+
+def cmd_synth(args) -> int:
+    from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, parse_effects_arg, synthesize
+
+    spec = SynthSpec(parse_effects_arg(args.effect, args.strength), args.seed,
+                     args.levels or DEFAULT_LEVELS, _directions(args.directions),
+                     args.duration or DEFAULT_DURATION_S)
+    res = synthesize(spec, args.out, args.key, workers=args.workers, progress=not args.quiet)
+    print(f"synth: {len(res.tests)} tests, {len(res.frf)} FRF rows -> {res.out_dir}; "
+          f"key -> {res.key_path}")
+    return 0
+
+
+def cmd_blind(args) -> int:
+    from .blind import BlindSpec, run_blind
+    from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS
+
+    spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
+                     args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
+                     args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
+                     workers=args.workers)
+    s = run_blind(spec, args.out, progress=not args.quiet)
+    def pct(x):
+        return "n/a" if x is None else f"{100 * x:.0f}%"
+
+    print(f"blind: {s['trials']} trials ({s['detectable_trials']} with hidden effects): "
+          f"top-1 {pct(s['top1'])}, top-3 {pct(s['top3'])}, false alarms "
+          f"{pct(s['false_alarm'])}, held-out gap removed {pct(s['heldout_reduction_mean'])} "
+          f"(mean); acceptance {'passed' if s['passed'] else 'NOT met'}")
+    print(f"-> {args.out}: blind.json, blind.md", file=sys.stdout)
+    return 0

@@ -1,0 +1,242 @@
+"""The diagnosis report: ``report.json`` (the machine-readable result, the
+keys of the issue's interface first), ``report.md`` (for a person) and the
+figures
+
+* ``gap_heatmap.png``: gap per channel (direction / segment / DoF) x band
+  before and after the best effect; significant cells outlined;
+* ``worst_cells.png``: measured transmissibility with its 1-sigma band
+  against the refitted base model and the best candidate, for the worst
+  significant cells;
+* ``ranking.png``: held-out gap reduction and delta-BIC of every candidate.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .diagnose import Diagnosis
+from .localize import BANDS, band_label
+
+#: Keys of the interface (tools outside the package read them), in order.
+INTERFACE_KEYS = ("verdict", "best_effect", "ranking", "localization", "gap_before",
+                  "gap_after")
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def report_json(diag: Diagnosis, extra: dict | None = None) -> dict:
+    r = diag.report
+    ordered = {k: r[k] for k in INTERFACE_KEYS}
+    ordered.update({k: v for k, v in r.items() if k not in ordered})
+    if extra:
+        ordered.update(extra)
+    return _jsonable(ordered)
+
+
+def write_report(diag: Diagnosis, out: Path, extra: dict | None = None) -> list[str]:
+    """Write report.json, report.md and the figures into `out`; the file
+    names written."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rep = report_json(diag, extra)
+    (out / "report.json").write_text(json.dumps(rep, indent=1) + "\n")
+    files = ["report.json"]
+    figs = write_figures(diag, out)
+    (out / "report.md").write_text(markdown(rep, figs))
+    return files + ["report.md"] + figs
+
+
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * x:.0f}%"
+
+
+def markdown(rep: dict, figures: list[str]) -> str:
+    lines = [f"# Sim-to-real gap diagnosis: **{rep['verdict']}**", ""]
+    lines.append(rep.get("explanation", ""))
+    lines.append("")
+    gb, ga = rep["gap_before"], rep["gap_after"]
+    lines += ["## Gap (excess chi^2 per degree of freedom; 0 = within measurement noise)",
+              "", "| | train | held-out |", "|---|---|---|",
+              f"| given model | {rep.get('gap_given_model', float('nan')):.3g} | |",
+              f"| base refit (before) | {gb['train']:.3g} | {gb['heldout']:.3g} |",
+              f"| with {rep.get('best_candidate') or 'best'} (after) | {ga['train']:.3g} | "
+              f"{ga['heldout']:.3g} |", ""]
+    lines += ["## Candidates (best first)", "",
+              "| effect | delta BIC | gap reduction train | held-out | parameters |",
+              "|---|---|---|---|---|"]
+    for e in rep["ranking"]:
+        par = "; ".join(f"{k}={v:.3g}" for vals in e["params"].values()
+                        for k, v in vals.items())
+        lines.append(f"| {e['effect']} | {e['delta_bic']:.1f} | "
+                     f"{_pct(e['gap_reduction_train'])} | {_pct(e['gap_reduction_heldout'])} "
+                     f"| {par} |")
+    lines.append("")
+    if rep.get("separating_experiment"):
+        lines += ["## Experiment that would separate the tied candidates", "",
+                  rep["separating_experiment"].get("text", ""), ""]
+    ev = rep.get("evidence", {})
+    if ev.get("level"):
+        lines += ["## Level dependence (data alone)", ""]
+        for d, e in ev["level"].items():
+            lines.append(f"- {d}: levels {e['levels']}, difference gap "
+                         f"{e['difference_gap']:.3g}, p = {e['p_value']:.2g}"
+                         f"{' (significant)' if e['significant'] else ''}, coherence deficit "
+                         f"{e['coherence_deficit']:.3f}")
+        lines.append("")
+    sig = [c for c in rep["localization"] if c["significant"]]
+    lines += [f"## Where the gap lies ({len(sig)} significant cells of "
+              f"{len(rep['localization'])})", "",
+              "| direction | segment | DoF | band | share | gap before | gap after |",
+              "|---|---|---|---|---|---|---|"]
+    for c in sig[:20]:
+        lines.append(f"| {c['direction']} | {c['segment']} | {c['dof']} | "
+                     f"{c['f_lo_hz']:g}-{c['f_hi_hz']:g} Hz | {_pct(c['share'])} | "
+                     f"{c['gap']:.3g} | {c['gap_after']:.3g} |")
+    lines += ["", "## Figures", ""] + [f"![{f}]({f})" for f in figures]
+    m = rep.get("method", {})
+    lines += ["", "## Method", "",
+              f"Held-out sets ({m.get('folds')}): {', '.join(m.get('heldout_sets', []))}. "
+              f"Significance: {m.get('significance')}; model floor "
+              f"{m.get('model_floor')}. Explained when the best candidate lowers the "
+              f"held-out chi^2 by more than its parameter penalty (delta BIC < 0) and removes "
+              f">= {_pct(m.get('explained_reduction'))} of the held-out gap; ambiguous when "
+              f"another candidate comes within {_pct(m.get('ambiguity_margin'))} and the level "
+              "evidence does not separate them.", ""]
+    t = rep.get("timing_s")
+    if t:
+        lines.append(f"Run time {t['total']:.0f} s ({t['families']:.0f} s linear families, "
+                     f"{t['fits']:.0f} s fits, {t['workers']} processes).")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------
+# Figures
+# ---------------------------------------------------------------------------
+
+
+def _cell_matrix(localization: list[dict], key: str):
+    chans = sorted({(c["direction"], c["segment"], c["dof"]) for c in localization})
+    idx = {ch: i for i, ch in enumerate(chans)}
+    M = np.full((len(chans), len(BANDS)), np.nan)
+    S = np.zeros_like(M, dtype=bool)
+    for c in localization:
+        b = [lo for lo, _ in BANDS].index(c["f_lo_hz"])
+        M[idx[(c["direction"], c["segment"], c["dof"])], b] = c[key]
+        S[idx[(c["direction"], c["segment"], c["dof"])], b] = c["significant"]
+    return chans, M, S
+
+
+def write_figures(diag: Diagnosis, out: Path) -> list[str]:
+    import matplotlib.pyplot as plt
+
+    rep = diag.report
+    files = []
+    loc = rep["localization"]
+    if loc:
+        chans, before, sig = _cell_matrix(loc, "gap")
+        _, after, _ = _cell_matrix(loc, "gap_after")
+        vmax = max(np.nanmax(before), 1.0)
+        fig, axes = plt.subplots(1, 2, figsize=(10, 0.22 * len(chans) + 2), sharey=True)
+        for ax, M, title in ((axes[0], before, "before (base refit)"),
+                             (axes[1], after, f"after ({rep.get('best_candidate')})")):
+            im = ax.imshow(np.log10(1 + np.nan_to_num(M)), aspect="auto", cmap="magma_r",
+                           vmin=0, vmax=math.log10(1 + vmax))
+            for i, j in zip(*np.nonzero(sig), strict=True):
+                ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="tab:blue",
+                                           lw=1.5))
+            ax.set_xticks(range(len(BANDS)), [band_label(i) for i in range(len(BANDS))],
+                          rotation=45, ha="right", fontsize=7)
+            ax.set_title(title, fontsize=9)
+        axes[0].set_yticks(range(len(chans)), [f"{d}: {s} {q}" for d, s, q in chans],
+                           fontsize=6)
+        fig.colorbar(im, ax=axes, label="log10(1 + gap)  (gap = excess chi^2 / dof)")
+        fig.suptitle(f"Gap per channel x band (blue: significant before); verdict "
+                     f"{rep['verdict']}", fontsize=10)
+        fig.savefig(out / "gap_heatmap.png", dpi=110)
+        plt.close(fig)
+        files.append("gap_heatmap.png")
+    files += _worst_cells_figure(diag, out)
+    if rep["ranking"]:
+        names = [e["effect"] for e in rep["ranking"]]
+        red = [100 * e["gap_reduction_heldout"] for e in rep["ranking"]]
+        dbic = [e["delta_bic"] for e in rep["ranking"]]
+        fig, axes = plt.subplots(1, 2, figsize=(10, 0.35 * len(names) + 1.5), sharey=True)
+        y = np.arange(len(names))
+        axes[0].barh(y, red, color=["tab:green" if r > 0 else "tab:gray" for r in red])
+        axes[0].set_xlabel("held-out gap reduction, %")
+        axes[0].axvline(100 * rep["method"]["explained_reduction"], color="k", ls="--", lw=0.8)
+        axes[1].barh(y, np.sign(dbic) * np.log10(1 + np.abs(dbic)),
+                     color=["tab:blue" if d < 0 else "tab:red" for d in dbic])
+        axes[1].set_xlabel("sign(dBIC) log10(1 + |dBIC|)  (< 0: supported)")
+        axes[0].set_yticks(y, names)
+        axes[0].invert_yaxis()
+        fig.suptitle("Candidate effects, best first", fontsize=10)
+        fig.tight_layout()
+        fig.savefig(out / "ranking.png", dpi=110)
+        plt.close(fig)
+        files.append("ranking.png")
+    return files
+
+
+def _worst_cells_figure(diag: Diagnosis, out: Path, n: int = 6) -> list[str]:
+    import matplotlib.pyplot as plt
+
+    rep, rows = diag.report, diag.rows
+    cells = [c for c in rep["localization"] if c["significant"]][:n] or rep["localization"][:2]
+    if not cells:
+        return []
+    H0 = diag.results["none"]["H_all"]
+    best = rep.get("best_candidate")
+    H1 = diag.results[best]["H_all"] if best in diag.results else None
+    ncol = min(3, len(cells))
+    nrow = math.ceil(len(cells) / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
+    for ax, c in zip(axes.flat, cells, strict=False):
+        chan = (rows.direction == c["direction"]) & (rows.segment == c["segment"]) & \
+            (rows.dof == c["dof"])
+        levels = sorted({float(v) for v in rows.level[chan]}, key=lambda v: (math.isnan(v), v))
+        for k, lv in enumerate(levels):
+            m = chan & ((rows.level == lv) if not math.isnan(lv) else np.isnan(rows.level))
+            f = rows.freq[m]
+            o = np.argsort(f)
+            mag = np.abs(rows.H[m])[o]
+            sd = np.sqrt(rows.rel_var[m][o]) * mag
+            col = f"C{k}"
+            ax.fill_between(f[o], mag - sd, mag + sd, color=col, alpha=0.25, lw=0)
+            ax.plot(f[o], mag, ".", color=col, ms=2, label=f"measured {lv:g} m/s²")
+            ax.plot(f[o], np.abs(H0[m])[o], "--", color=col, lw=1, label="base refit")
+            if H1 is not None:
+                ax.plot(f[o], np.abs(H1[m])[o], "-", color=col, lw=1.2, label=best)
+        ax.axvspan(c["f_lo_hz"], c["f_hi_hz"], color="y", alpha=0.15)
+        unit = "deg/m" if c["dof"] in ("roll", "pitch", "yaw") else "m/m"
+        ax.set_title(f"{c['direction']}: {c['segment']} {c['dof']} (share "
+                     f"{100 * c['share']:.0f}%)", fontsize=9)
+        ax.set_xlabel("frequency, Hz")
+        ax.set_ylabel(f"|T| ({unit})")
+        ax.set_xlim(0, 12)
+    for ax in list(axes.flat)[len(cells):]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(out / "worst_cells.png", dpi=110)
+    plt.close(fig)
+    return ["worst_cells.png"]

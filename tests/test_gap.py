@@ -1,0 +1,297 @@
+"""Gap diagnosis: effects, localization statistics, synthetic lab data,
+the diagnosis end to end (a short blind run with the issue's acceptance
+assertions) and its CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ehm_drake.gap.effects import EFFECT_NAMES, EFFECTS, effect_values, validate_effects
+from ehm_drake.gap.localize import BANDS, Rows, band_index, localize, relative_variance
+from ehm_drake.gap.synth import SynthError, SynthSpec, synthesize
+from ehm_drake.systems.outputs import CHANNEL_NAMES
+
+# ---------------------------------------------------------------------------
+# Effects
+# ---------------------------------------------------------------------------
+
+
+def test_the_issue_effects_exist_with_1_to_3_parameters_and_off_at_zero():
+    for name in ("reflex_delay", "seat_foam_stiffening", "seat_friction",
+                 "backrest_separation", "arms", "visceral_mass", "cocontraction",
+                 "seat_cushion_dynamics"):
+        assert name in EFFECT_NAMES
+        e = EFFECTS[name]
+        assert 1 <= len(e.params) <= 3
+        v0, v1 = effect_values(name, 0.0), effect_values(name, 1.0)
+        assert v0 != v1  # strength moves the parameters
+
+
+def test_bad_effect_parameters_are_refused_with_the_name():
+    with pytest.raises(ValueError, match="unknown effect"):
+        validate_effects({"levitation": {}})
+    with pytest.raises(ValueError, match="tau_s"):
+        validate_effects({"reflex_delay": {"tau_s": -0.01}})
+    with pytest.raises(ValueError, match="gamma"):
+        validate_effects({"seat_foam_stiffening": {"gamma_per_mm2": float("nan")}})
+
+
+# ---------------------------------------------------------------------------
+# Localization statistics (no model: known truth, known noise)
+# ---------------------------------------------------------------------------
+
+
+def _rows(rng, coherence=0.9, n_avg=10, directions=("z",)):
+    chans = ["pelvis_z", "trunk_x", "head_pitch"]
+    f = np.round(np.arange(0.1, 12.0 + 1e-9, 0.1), 6)
+    parts = []
+    for d in directions:
+        for c in chans:
+            seg, dof = c.split("_")
+            H = (1.0 + 0.5j) / (1 + 1j * f / 6.0)
+            parts.append((d, seg, dof, CHANNEL_NAMES.index(c), f, H))
+    n = sum(len(p[4]) for p in parts)
+    cat = lambda k: np.concatenate([np.broadcast_to(p[k], len(p[4])) for p in parts])  # noqa
+    coh = np.full(n, coherence)
+    nav = np.full(n, float(n_avg))
+    rv = relative_variance(coh, nav, 0.0)
+    H_true = cat(5)
+    sd = np.sqrt(rv) * np.abs(H_true)
+    H_meas = H_true + sd * (rng.standard_normal(n) + 1j * rng.standard_normal(n))
+    freq = cat(4)
+    rows = Rows(cat(0).astype(str), cat(1).astype(str), cat(2).astype(str), cat(3).astype(int),
+                freq, np.full(n, 0.6), band_index(freq), H_meas, coh, nav, rv)
+    return rows, H_true
+
+
+def _chi(rows, H_model):
+    from ehm_drake.gap.localize import chi2_rows
+
+    return chi2_rows(rows, H_model)
+
+
+def test_noise_at_its_stated_uncertainty_is_not_called_a_gap():
+    false = 0
+    for seed in range(20):
+        rows, H = _rows(np.random.default_rng(seed))
+        false += any(c["significant"] for c in localize(rows, _chi(rows, H)))
+    assert false <= 1  # Bonferroni at p = 0.01: ~0.2 expected in 20 datasets
+
+
+def test_an_unmodelled_resonance_is_localized_to_its_channel_and_band():
+    rows, H = _rows(np.random.default_rng(3))
+    # The model misses a 10 Hz resonance of the head pitch channel.
+    m = (rows.segment == "head") & (rows.dof == "pitch")
+    extra = 1.0 + 0.6 / (1 - (rows.freq / 10.0) ** 2 + 2j * 0.1 * rows.freq / 10.0)
+    rows.H[m] = rows.H[m] * extra[m]
+    cells = localize(rows, _chi(rows, H))
+    top = cells[0]
+    assert (top["segment"], top["dof"], top["f_lo_hz"]) == ("head", "pitch", 8.0)
+    assert top["significant"] and top["share"] > 0.5
+    sig = [c for c in cells if c["significant"]]
+    assert all(c["segment"] == "head" for c in sig)
+
+
+def test_the_bands_are_the_issue_bands():
+    assert BANDS == ((0.1, 1.0), (1.0, 2.5), (2.5, 5.0), (5.0, 8.0), (8.0, 12.0))
+    assert list(band_index(np.array([0.05, 0.1, 1.0, 7.99, 12.0, 12.1]))) == [-1, 0, 1, 3, 4, -1]
+
+
+# ---------------------------------------------------------------------------
+# Synthetic lab data
+# ---------------------------------------------------------------------------
+
+
+def test_synth_refuses_bad_requests(tmp_path):
+    with pytest.raises(SynthError, match="strength"):
+        SynthSpec({"arms": 1.5}, 1).validate()
+    with pytest.raises(SynthError, match="m/s\\^2"):
+        SynthSpec({}, 1, levels=(300.0,)).validate()
+    with pytest.raises(SynthError, match="directions"):
+        SynthSpec({}, 1, directions="zz").validate()
+    with pytest.raises(SynthError, match="key"):
+        synthesize(SynthSpec({}, 1, directions="z"), tmp_path / "d", tmp_path / "d" / "k.json")
+
+
+@pytest.mark.slow
+def test_synth_is_deterministic_and_keeps_the_truth_out_of_the_data(tmp_path):
+    spec = SynthSpec({"visceral_mass": 0.5}, 7, levels=(0.6,), directions="z",
+                     duration_s=30.0)
+    a = synthesize(spec, tmp_path / "a", tmp_path / "ka.json", workers=1, progress=False)
+    synthesize(spec, tmp_path / "b", tmp_path / "kb.json", workers=1, progress=False)
+    for rel in ("frf.csv", "tests.json", "z_0.6/timeseries.csv"):
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes()
+    text = "".join(p.read_text() for p in (tmp_path / "a").rglob("*") if p.is_file())
+    assert "visceral" not in text and "strength" not in text
+    key = json.loads((tmp_path / "ka.json").read_text())
+    assert key["effects"]["visceral_mass"]["strength"] == 0.5
+    assert len(a.frf) > 0 and np.all(np.isfinite(a.frf.gain))
+    with pytest.raises(SynthError, match="not empty|exists"):
+        synthesize(spec, tmp_path / "a", tmp_path / "kc.json", workers=1, progress=False)
+
+
+# ---------------------------------------------------------------------------
+# End to end: a short blind run (the issue's acceptance assertions on fewer
+# trials), an unexplained gap, the report files and the CLI
+# ---------------------------------------------------------------------------
+
+#: Vertical tests at two levels, 30 s records: the shortest protocol in which the
+#: level dependence and a held-out test exist.  Seed 5 draws, in this order: no
+#: effect, seat_foam_stiffening (0.96), visceral_mass (0.81).
+SHORT_BLIND = dict(trials=3, seed=5, directions="z", levels=(0.3, 0.6), duration_s=30.0,
+                   hidden=("visceral_mass", "seat_foam_stiffening"), p_none=0.34, p_two=0.0)
+
+
+@pytest.fixture(scope="module")
+def blind_run(tmp_path_factory):
+    from ehm_drake.gap.blind import BlindSpec, run_blind
+
+    out = tmp_path_factory.mktemp("blind")
+    spec = BlindSpec(**SHORT_BLIND, workers=2)
+    return out, spec, run_blind(spec, out, progress=False)
+
+
+@pytest.mark.slow
+def test_short_blind_run_meets_the_acceptance(blind_run):
+    from ehm_drake.gap.blind import ACCEPTANCE
+
+    out, _, s = blind_run
+    labels = {t: row for t, row in s["confusion"].items()}
+    assert set(labels) == {"none", "seat_foam_stiffening", "visceral_mass"}
+    assert s["top1"] >= ACCEPTANCE["top1"], s["confusion"]
+    assert s["top3"] >= ACCEPTANCE["top3"]
+    assert s["false_alarm"] <= ACCEPTANCE["false_alarm"]
+    assert s["heldout_reduction_mean"] >= ACCEPTANCE["heldout_reduction"]
+    # The diagnosis never saw the key: keys live outside every trial's data folder.
+    for trial in sorted(out.glob("trial_*")):
+        assert not list(trial.rglob("*key*"))
+        rep = json.loads((trial / "diagnosis" / "report.json").read_text())
+        for k in ("verdict", "best_effect", "ranking", "localization", "gap_before",
+                  "gap_after"):
+            assert k in rep
+        for f in ("report.md", "gap_heatmap.png", "ranking.png", "worst_cells.png"):
+            assert (trial / "diagnosis" / f).stat().st_size > 0
+    assert "Confusion matrix" in (out / "blind.md").read_text()
+
+
+@pytest.mark.slow
+def test_blind_run_resumes_without_recomputing(blind_run):
+    from ehm_drake.gap.blind import run_blind
+
+    out, spec, s = blind_run
+    stamps = {p: p.stat().st_mtime_ns for p in out.glob("trial_*/result.json")}
+    again = run_blind(spec, out, progress=False)
+    assert again["confusion"] == s["confusion"]
+    assert {p: p.stat().st_mtime_ns for p in out.glob("trial_*/result.json")} == stamps
+
+
+@pytest.mark.slow
+def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, tmp_path):
+    """An extra 10 Hz resonance in one channel of no-effect data."""
+    import shutil
+
+    from ehm_drake.analysis.dataio import read_frf
+    from ehm_drake.cli import main
+
+    out, _, _ = blind_run
+    none_trial = next(t for t in sorted(out.glob("trial_*"))
+                      if json.loads((t / "result.json").read_text())["hidden"] == {})
+    data = tmp_path / "edited"
+    shutil.copytree(none_trial / "data", data)
+    frf = read_frf(data / "frf.csv")
+    chan = (frf.direction == "z") & (frf.segment == "trunk") & (frf.dof == "x")
+    r = frf.freq_hz / 10.0
+    frf.gain[chan] = frf.gain[chan] * np.abs(1.0 + 0.8 / (1 - r**2 + 2j * 0.08 * r))[chan]
+    frf.to_csv(data / "frf.csv")
+    assert main(["diagnose", str(data), "--out", str(tmp_path / "d"), "--quiet",
+                 "--workers", "2"]) == 0
+    rep = json.loads((tmp_path / "d" / "report.json").read_text())
+    assert rep["verdict"] == "unexplained"
+    assert rep["best_effect"] is None
+    top = rep["localization"][0]
+    assert (top["direction"], top["segment"], top["dof"], top["f_lo_hz"]) == \
+        ("z", "trunk", "x", 8.0)
+    sig = [c for c in rep["localization"] if c["significant"]]
+    assert all((c["segment"], c["dof"]) == ("trunk", "x") for c in sig)
+
+
+def test_diagnose_cli_refuses_bad_data_with_a_clear_message(tmp_path, capsys):
+    from ehm_drake.cli import main
+
+    assert main(["diagnose", str(tmp_path / "nowhere"), "--out", str(tmp_path / "o")]) == 2
+    assert "nowhere" in capsys.readouterr().err
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "frf.csv").write_text(
+        "direction,segment,dof,freq_hz,gain,phase_deg,coherence,level_rms\n"
+        "z,head,z,1.0,nan,0,0.9,0.6\n")
+    assert main(["diagnose", str(bad), "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert "gain" in err and "Traceback" not in err
+    assert main(["synth", "--effect", "arms", "--strength", "2", "--seed", "1", "--out",
+                 str(tmp_path / "s"), "--key", str(tmp_path / "k.json")]) == 2
+    assert "[0, 1]" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------------------
+# The effects in the nonlinear model (statics and a short run)
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def settled_effects():
+    from ehm_drake.params import load_params
+    from ehm_drake.simulation import settle
+
+    p = load_params()
+    out = {"none": settle(p, settle_time=0.5)}
+    for name in EFFECT_NAMES:
+        out[name] = settle(p, settle_time=0.5, effects={name: effect_values(name, 1.0)})
+    return p, out
+
+
+def _support(s):
+    return s.summary["pan_force_n"] + s.summary["floor_force_n"]
+
+
+@pytest.mark.slow
+def test_effects_change_the_statics_only_where_physics_says(settled_effects):
+    _, st = settled_effects
+    base = st["none"]
+    g = 9.81
+    # The abdominal wobbling mass (5 kg at strength 1) and the arms are parts of the
+    # same 75.3 kg body (taken from the torso), so the seat and floor carry the same
+    # weight; the total weight is carried (pan + floor + backrest's vertical share).
+    for name in ("visceral_mass", "arms"):
+        assert _support(st[name]) == pytest.approx(_support(base), rel=0.02), name
+    assert _support(base) == pytest.approx(75.3 * g, rel=0.05)
+    # Moving the pads 4 mm back unloads the backrest.
+    assert st["backrest_separation"].summary["backrest_force_n"]["total"] < \
+        0.7 * base.summary["backrest_force_n"]["total"]
+    # Effects that act only under vibration leave the static support unchanged.
+    for name in ("reflex_delay", "seat_foam_stiffening", "seat_friction", "cocontraction",
+                 "seat_cushion_dynamics"):
+        assert _support(st[name]) == pytest.approx(_support(base), rel=0.01), name
+    for name, s in st.items():
+        assert s.summary["max_joint_error_deg"] < 0.5, name
+        assert abs(s.summary["head_pitch_deg"]) < 3.0, name
+
+
+@pytest.mark.slow
+def test_every_effect_runs_in_the_time_domain(settled_effects):
+    from ehm_drake.signals import make_seat_signal
+    from ehm_drake.simulation import vibrate
+
+    p, st = settled_effects
+    s = p.simulation
+    sig = make_seat_signal("random", "z", 0.6, 2.0, 3, s.time_step_s, 0.5, 0.5)
+    ref = vibrate(p, st["none"], sig)
+    head_ref = np.std(ref.channel("head", "z"))
+    for name in EFFECT_NAMES:
+        r = vibrate(p, st[name], sig, effects={name: effect_values(name, 1.0)})
+        head = r.channel("head", "z")
+        assert np.all(np.isfinite(head)), name
+        assert 0.3 * head_ref < np.std(head) < 3.0 * head_ref, name
