@@ -43,7 +43,8 @@ def test_json_round_trip(tmp_path, params):
 @pytest.mark.parametrize("data,match", [
     ({"pid": {"spine": {"kpp": [1, 2, 3]}}}, r"pid\.spine\.kpp"),
     ({"passive": {"hips": {"stiffness": [-1, 2, 3]}}}, r"passive\.hips\.stiffness\[0\].*negative"),
-    ({"contact": {"pelvis_pan": {"stiffness": float("nan")}}}, r"contact\.pelvis_pan\.stiffness.*finite"),
+    ({"contact": {"pelvis_pan": {"stiffness": float("nan")}}},
+     r"contact\.pelvis_pan\.stiffness.*finite"),
     ({"contact": {"pelvis_pan": {"damping": "soft"}}}, r"contact\.pelvis_pan\.damping.*number"),
     ({"contact": {"model": "magic"}}, r"contact\.model"),
     ({"simulation": {"time_step_s": 1.0}}, r"time_step_s.*milliseconds"),

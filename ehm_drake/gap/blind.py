@@ -210,13 +210,14 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         results.append(res)
         if progress:
             s = res["score"]
+            ok = s["top1"] or (not s["detectable"] and not s["false_alarm"])
             wall = time.perf_counter() - t0
             done = sum(1 for r in results if "synth_s" in r)
             left = len(trials) - k - 1
             sys.stderr.write(
                 f"blind: trial {k + 1}/{len(trials)}: hidden {s['truth_label']} -> "
                 f"{s['verdict']} {s['predicted_label']} "
-                f"({'ok' if (s['top1'] or (not s['detectable'] and not s['false_alarm'])) else 'MISS'}"
+                f"({'ok' if ok else 'MISS'}"
                 f"); eta {wall / max(done, 1) * left:.0f} s\n")
     summary = summarize(results)
     summary["settings"] = settings

@@ -91,7 +91,8 @@ def load_weights(path: str | Path | None) -> dict[str, float]:
     out = {}
     for k, v in data.items():
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise ParameterError(f"{path}: weight of {k!r} must be a non-negative number, got {v!r}")
+            raise ParameterError(
+                f"{path}: weight of {k!r} must be a non-negative number, got {v!r}")
         parts = str(k).replace("/", " ").replace("_", " ").split()
         if not parts:
             raise ParameterError(f"{path}: empty key")
