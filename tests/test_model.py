@@ -145,3 +145,19 @@ def test_cardan_torque_mapping_conserves_power(hp):
     qdot = v.copy()
     qdot[b] = np.einsum("nij,nj->ni", rpy_rate_matrices(q[b]), v[b])
     assert f @ v == pytest.approx(tau @ qdot, rel=1e-12)
+
+
+def test_the_sdf_folder_resolves_outside_the_checkout(tmp_path):
+    """From another folder, `ehm_drake` is the installed package (not the checkout's
+    source tree): its SDF folder must be a real folder holding package.xml."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = subprocess.run(
+        [sys.executable, "-c",
+         "from ehm_drake.model.plant import model_directory; print(model_directory())"],
+        cwd=tmp_path, capture_output=True, text=True, check=True).stdout.strip()
+    folder = Path(out)
+    assert (folder / "package.xml").is_file(), out
+    assert (folder / "ehm_human_50th_male.sdf").is_file()

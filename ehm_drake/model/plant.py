@@ -84,9 +84,14 @@ def model_directory() -> Path:
     the checkout's `sdf/` folder.
     """
     try:
-        return Path(str(resources.files("ehm_drake.sdf")))
+        # `ehm_drake.sdf` has no __init__.py: files() gives a MultiplexedPath, whose
+        # str() is not a path; a file in it is.
+        folder = Path(str(resources.files("ehm_drake.sdf").joinpath("package.xml"))).parent
+        if (folder / "package.xml").is_file():
+            return folder
     except ModuleNotFoundError:
-        return Path(__file__).resolve().parents[2] / "sdf"
+        pass
+    return Path(__file__).resolve().parents[2] / "sdf"
 
 
 def configure_parser(parser: Parser) -> Parser:
