@@ -123,14 +123,14 @@ def test_synth_refuses_bad_requests(tmp_path):
 
 #: Vertical tests at two levels, 30 s records: the shortest protocol in which the
 #: level dependence and a held-out test exist.  Seed 21 draws, in this order: no
-#: effect, seat_foam_stiffening at 0.98 and at 0.92.  Vertical-only 30 s records show the
+#: effect, seat_foam_stiffening at 0.98 (a third trial would be the foam at 0.92).  Vertical-only 30 s records show the
 #: seat foam clearly; the trunk effects (co-contraction, visceral mass, reflex delay) act
 #: mostly in fore-aft and lateral motion and need the full protocol of the README's blind run
 #: (in this protocol, co-contraction at 0.81 and a 4 kg visceral mass were within the noise).
 #: Three candidates (linear and level-dependent, an interpolated and two exact families)
 #: keep it within the test budget; the full library is checked by `ehm-drake blind`.
 CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "cocontraction")
-SHORT_BLIND = dict(trials=3, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
+SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
                    hidden=("seat_foam_stiffening",), candidates=CANDIDATES,
                    p_none=0.34, p_two=0.0)
 
@@ -151,7 +151,7 @@ def test_short_blind_run_meets_the_acceptance(blind_run):
     out, _, s = blind_run
     labels = {t: {p: n for p, n in row.items() if n} for t, row in s["confusion"].items()}
     assert labels == {"none": {"no_significant_gap": 1},
-                      "seat_foam_stiffening": {"seat_foam_stiffening": 2}}
+                      "seat_foam_stiffening": {"seat_foam_stiffening": 1}}
     assert s["top1"] >= ACCEPTANCE["top1"], s["confusion"]
     assert s["top3"] >= ACCEPTANCE["top3"]
     assert s["false_alarm"] <= ACCEPTANCE["false_alarm"]

@@ -324,9 +324,12 @@ def test_ctrl_c_keeps_finished_runs(tmp_path):
     spec_path.write_text(json.dumps(spec_with(
         grid={"contact.pelvis_pan.stiffness": [40000.0, 50000.0, 55000.0]})))
     out = tmp_path / "out"
+    # Ctrl-C as at a terminal: a test run started in the background (as CI may be) hands
+    # SIGINT down as ignored, and Python then keeps ignoring it; restore the default.
     proc = subprocess.Popen([sys.executable, "-m", "ehm_drake.sweep", str(spec_path), "--out",
                              str(out), "--workers", "1"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not (out / "runs").is_dir() or not list((out / "runs").glob("*.json")):
