@@ -3,8 +3,12 @@ RMS per axis, random 0.1-12 Hz), outputs logged at 200 Hz, one core.
 
     python bench/bench_simulate.py [--duration 60] [--time-step 0.001]
 
-Prints the settle time (static equilibrium + 5 s settling) and the
-real-time factor of the vibration run (simulated seconds per wall second).
+Prints the settle time (static equilibrium + 5 s settling), the real-time
+factor of the vibration run (simulated seconds per wall second) and the
+ceiling set by the plant's own discrete step: the plant alone (SAP contact
+solve, no Python systems, no logging), sitting in its settled state with the
+controllers' torques frozen at their settled values.  No controller or
+output code can make `simulate` faster than that ceiling at this step.
 """
 
 from __future__ import annotations
@@ -13,9 +17,40 @@ import argparse
 import os
 import time
 
+import numpy as np
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from ehm_drake.diagram import build_diagram
+from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import load_params
 from ehm_drake.signals import make_seat_signal
-from ehm_drake.simulation import settle, vibrate
+from ehm_drake.simulation import StateMap, settle, vibrate
+
+
+def plant_only_real_time_factor(params, settled, duration: float = 5.0) -> float:
+    """Real-time factor of the plant alone from the settled state, its
+    applied generalized force fixed at the settled closed loop's value."""
+    closed = build_diagram(params, guard=False, seat_forces=False)
+    ctx = closed.diagram.CreateDefaultContext()
+    StateMap(closed).set(ctx, settled.state)
+    for name in ("seat_acceleration", "seat_displacement"):
+        closed.diagram.GetInputPort(name).FixValue(ctx, np.zeros(3))
+    adder = closed.diagram.GetSubsystemByName("generalized_force_sum")
+    tau = adder.get_output_port().Eval(adder.GetMyContextFromRoot(ctx)).copy()
+    builder = DiagramBuilder()
+    hp = add_seated_human(builder, params)
+    diagram = builder.Build()
+    root = diagram.CreateDefaultContext()
+    pc = hp.plant.GetMyMutableContextFromRoot(root)
+    hp.plant.SetPositionsAndVelocities(
+        pc, closed.plant.GetPositionsAndVelocities(closed.plant_context(ctx)))
+    hp.plant.get_applied_generalized_force_input_port().FixValue(pc, tau)
+    sim = Simulator(diagram, root)
+    sim.Initialize()
+    t0 = time.perf_counter()
+    sim.AdvanceTo(duration)
+    return duration / (time.perf_counter() - t0)
 
 
 def main() -> None:
@@ -39,6 +74,9 @@ def main() -> None:
     print(f"settle (equilibrium + {s.settle_time_s:g} s): {t_settle:.1f} s wall")
     print(f"vibrate {args.duration:g} s of 3D excitation: {result.meta['wall_s']:.1f} s wall, "
           f"real-time factor {result.meta['real_time_factor']:.2f}")
+    ceiling = plant_only_real_time_factor(params, settled)
+    print(f"ceiling: the plant alone (contact solve, no controllers, no logging) runs at "
+          f"{ceiling:.2f}x real time ({s.time_step_s / ceiling * 1e6:.0f} us per step)")
 
 
 if __name__ == "__main__":

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .argtypes import int_at_least
 from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import VARIANTS, ParameterError, load_params
@@ -51,16 +52,6 @@ def _positive(name):
             raise argparse.ArgumentTypeError(f"{name} must be a positive finite number, got {v}")
         return v
     return parse
-
-
-def _non_negative_int(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be an integer, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"seed must be >= 0, got {v}")
-    return v
 
 
 def prepare_output_dir(path: str | Path, force: bool) -> Path:
@@ -435,7 +426,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seat acceleration RMS per axis, m/s^2 (paper: %(default)s)")
     p.add_argument("--duration", type=_positive("--duration"), default=60.0, metavar="S",
                    help="vibration time after settling, s (default %(default)s)")
-    p.add_argument("--seed", type=_non_negative_int, default=0, metavar="N",
+    p.add_argument("--seed", type=int_at_least(0), default=0, metavar="N",
                    help="random seed of the excitation")
     p.add_argument("--excitation", choices=KINDS, default="random",
                    help="signal type (default random 0.1-12 Hz)")

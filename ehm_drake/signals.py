@@ -49,7 +49,8 @@ class SeatSignal:
             raise SignalError(f"seat acceleration must have shape (N, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):
             k = int(np.argwhere(~np.isfinite(a))[0, 0])
-            raise SignalError(f"seat acceleration is not finite at sample {k} (t={k * self.time_step:g} s)")
+            raise SignalError(f"seat acceleration is not finite at sample {k} "
+                              f"(t={k * self.time_step:g} s)")
         self.acceleration = a
         h = self.time_step
         v = np.vstack([np.zeros(3), np.cumsum(a[:-1] * h, axis=0)])
@@ -166,7 +167,8 @@ def read_acceleration_csv(path: str | Path, h: float) -> np.ndarray:
     need = ["t", "seat_ax", "seat_ay", "seat_az"]
     missing = [c for c in need if c not in header]
     if missing:
-        raise SignalError(f"{path}: missing column(s) {', '.join(missing)} (have {', '.join(header)})")
+        raise SignalError(f"{path}: missing column(s) {', '.join(missing)} "
+                          f"(have {', '.join(header)})")
     cols = [header.index(c) for c in need]
     data = np.full((len(rows) - 1, 4), np.nan)
     for i, r in enumerate(rows[1:]):
@@ -245,7 +247,8 @@ def make_seat_signal(
     for name, val in (("duration", duration), ("settle_time", settle_time),
                       ("onset_time", onset_time)):
         if not (isinstance(val, (int, float)) and math.isfinite(val)) or val < 0:
-            raise SignalError(f"{name} must be a finite non-negative number of seconds, got {val!r}")
+            raise SignalError(
+                f"{name} must be a finite non-negative number of seconds, got {val!r}")
     if kind != "csv" and duration <= onset_time:
         raise SignalError(f"duration ({duration} s) must exceed the onset time ({onset_time} s)")
     h = float(time_step)

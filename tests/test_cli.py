@@ -9,6 +9,9 @@ import pytest
 from ehm_drake.analysis.dataio import read_frf, read_timeseries
 from ehm_drake.cli import main
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("cli")
+
 
 @pytest.fixture(scope="module")
 def sim_dir(tmp_path_factory):

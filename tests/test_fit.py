@@ -12,6 +12,9 @@ from ehm_drake.identification.parameters import apply_scales, resolve_free, scal
 from ehm_drake.identification.synthetic import synthetic_frf
 from ehm_drake.params import ParameterError, load_params
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("fit")
+
 
 @pytest.fixture(scope="module")
 def recovery(params):

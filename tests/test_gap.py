@@ -1,10 +1,9 @@
 """Gap diagnosis: effects, localization statistics, synthetic lab data,
-the diagnosis end to end (a short blind run with the issue's acceptance
-assertions) and its CLI."""
+the diagnose CLI's errors, the effects in the nonlinear model.  The
+diagnosis end to end (a short blind run with the issue's acceptance
+assertions) is in test_gap_blind.py."""
 
 from __future__ import annotations
-
-import json
 
 import numpy as np
 import pytest
@@ -13,6 +12,9 @@ from ehm_drake.gap.effects import EFFECT_NAMES, EFFECTS, effect_values, validate
 from ehm_drake.gap.localize import BANDS, Rows, band_index, localize, relative_variance
 from ehm_drake.gap.synth import SynthError, SynthSpec, synthesize
 from ehm_drake.systems.outputs import CHANNEL_NAMES
+
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("gap")
 
 # ---------------------------------------------------------------------------
 # Effects
@@ -117,122 +119,8 @@ def test_synth_refuses_bad_requests(tmp_path):
 
 
 # ---------------------------------------------------------------------------
-# End to end: a short blind run (the issue's acceptance assertions on fewer
-# trials), an unexplained gap, the report files and the CLI
+# The diagnose CLI (the end-to-end blind run is in test_gap_blind.py)
 # ---------------------------------------------------------------------------
-
-#: Vertical tests at two levels, 30 s records: the shortest protocol in which the
-#: level dependence and a held-out test exist.  Seed 21 draws, in this order: no
-#: effect, seat_foam_stiffening at 0.98 (a third trial would be the foam at 0.92).  Vertical-only 30 s records show the
-#: seat foam clearly; the trunk effects (co-contraction, visceral mass, reflex delay) act
-#: mostly in fore-aft and lateral motion and need the full protocol of the README's blind run
-#: (in this protocol, co-contraction at 0.81 and a 4 kg visceral mass were within the noise).
-#: Three candidates (linear and level-dependent, an interpolated and two exact families)
-#: keep it within the test budget; the full library is checked by `ehm-drake blind`.
-CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "cocontraction")
-SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
-                   hidden=("seat_foam_stiffening",), candidates=CANDIDATES,
-                   p_none=0.34, p_two=0.0)
-
-
-@pytest.fixture(scope="module")
-def blind_run(tmp_path_factory):
-    from ehm_drake.gap.blind import BlindSpec, run_blind
-
-    out = tmp_path_factory.mktemp("blind")
-    spec = BlindSpec(**SHORT_BLIND, workers=2)
-    return out, spec, run_blind(spec, out, progress=False)
-
-
-@pytest.mark.slow
-def test_short_blind_run_meets_the_acceptance(blind_run):
-    from ehm_drake.gap.blind import ACCEPTANCE
-
-    out, _, s = blind_run
-    labels = {t: {p: n for p, n in row.items() if n} for t, row in s["confusion"].items()}
-    assert labels == {"none": {"no_significant_gap": 1},
-                      "seat_foam_stiffening": {"seat_foam_stiffening": 1}}
-    assert s["top1"] >= ACCEPTANCE["top1"], s["confusion"]
-    assert s["top3"] >= ACCEPTANCE["top3"]
-    assert s["false_alarm"] <= ACCEPTANCE["false_alarm"]
-    assert s["heldout_reduction_mean"] >= ACCEPTANCE["heldout_reduction"]
-    # The diagnosis never saw the key: keys live outside every trial's data folder.
-    for trial in sorted(out.glob("trial_*")):
-        assert not list(trial.rglob("*key*"))
-        rep = json.loads((trial / "diagnosis" / "report.json").read_text())
-        for k in ("verdict", "best_effect", "ranking", "localization", "gap_before",
-                  "gap_after"):
-            assert k in rep
-        for f in ("report.md", "gap_heatmap.png", "ranking.png", "worst_cells.png"):
-            assert (trial / "diagnosis" / f).stat().st_size > 0
-    assert "Confusion matrix" in (out / "blind.md").read_text()
-
-
-@pytest.mark.slow
-def test_synth_is_deterministic_and_keeps_the_truth_out_of_the_data(blind_run, tmp_path):
-    """The blind run's no-effect trial, synthesized again from its seed."""
-    from ehm_drake.gap.blind import plan
-
-    out, spec, _ = blind_run
-    tr = plan(spec)[0]
-    assert tr["effects"] == {}
-    key = tmp_path / "key.json"
-    synthesize(SynthSpec(tr["effects"], tr["synth_seed"], spec.levels, spec.directions,
-                         spec.duration_s), tmp_path / "again", key, workers=2, progress=False)
-    first = out / "trial_000" / "data"
-    for rel in ("frf.csv", "tests.json", "z_0.3/timeseries.csv", "z_0.6/timeseries.csv"):
-        assert (tmp_path / "again" / rel).read_bytes() == (first / rel).read_bytes(), rel
-    # The data hold nothing of the truth; the key holds it.
-    for trial in sorted(out.glob("trial_*")):
-        text = "".join(p.read_text() for p in (trial / "data").rglob("*") if p.is_file())
-        assert "strength" not in text and "seat_foam" not in text
-    truth = json.loads((out / "keys" / "trial_001.json").read_text())["effects"]
-    assert truth["seat_foam_stiffening"]["strength"] == pytest.approx(0.984)
-    with pytest.raises(SynthError, match="not empty|exists"):
-        synthesize(SynthSpec({}, 1, directions="z"), first, tmp_path / "k2.json")
-
-
-@pytest.mark.slow
-def test_blind_run_resumes_without_recomputing(blind_run):
-    from ehm_drake.gap.blind import run_blind
-
-    out, spec, s = blind_run
-    stamps = {p: p.stat().st_mtime_ns for p in out.glob("trial_*/result.json")}
-    again = run_blind(spec, out, progress=False)
-    assert again["confusion"] == s["confusion"]
-    assert {p: p.stat().st_mtime_ns for p in out.glob("trial_*/result.json")} == stamps
-
-
-@pytest.mark.slow
-def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, tmp_path):
-    """An extra 10 Hz resonance in one channel of no-effect data: a peak filter,
-    1 away from 10 Hz and 2 at it."""
-    import shutil
-
-    from ehm_drake.analysis.dataio import read_frf
-    from ehm_drake.cli import main
-
-    out, _, _ = blind_run
-    none_trial = next(t for t in sorted(out.glob("trial_*"))
-                      if json.loads((t / "result.json").read_text())["hidden"] == {})
-    data = tmp_path / "edited"
-    shutil.copytree(none_trial / "data", data)
-    frf = read_frf(data / "frf.csv")
-    chan = (frf.direction == "z") & (frf.segment == "head") & (frf.dof == "z")
-    r = frf.freq_hz / 10.0
-    peak = 2j * 0.08 * r / (1 - r**2 + 2j * 0.08 * r)
-    frf.gain[chan] = frf.gain[chan] * np.abs(1.0 + 1.0 * peak)[chan]
-    frf.to_csv(data / "frf.csv")
-    assert main(["diagnose", str(data), "--out", str(tmp_path / "d"), "--quiet",
-                 "--workers", "2", "--effects", ",".join(CANDIDATES)]) == 0
-    rep = json.loads((tmp_path / "d" / "report.json").read_text())
-    assert rep["verdict"] == "unexplained"
-    assert rep["best_effect"] is None
-    top = rep["localization"][0]
-    assert (top["direction"], top["segment"], top["dof"], top["f_lo_hz"]) == \
-        ("z", "head", "z", 8.0)
-    sig = [c for c in rep["localization"] if c["significant"]]
-    assert all((c["segment"], c["dof"]) == ("head", "z") for c in sig)
 
 
 def test_diagnose_cli_refuses_bad_data_with_a_clear_message(tmp_path, capsys):

@@ -10,6 +10,9 @@ from ehm_drake.analysis.linear import default_frequencies, linearize, linearize_
 from ehm_drake.diagram import build_diagram
 from ehm_drake.params import params_from_dict
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("linear")
+
 
 def _rig_modes(masses, kg, cg, ks=(), cs=(), method="fd"):
     diagram, plant, ctx = chain_rig(masses, kg, cg, ks, cs)

@@ -20,6 +20,9 @@ from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import vibrate
 from ehm_drake.systems.outputs import CHANNEL_NAMES
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("linear_vs_nonlinear")
+
 DOMINANT = {"x": [("head", "x"), ("head", "pitch"), ("trunk", "x")],
             "y": [("head", "y"), ("head", "roll")],
             "z": [("pelvis", "z"), ("head", "z")]}

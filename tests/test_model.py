@@ -17,6 +17,9 @@ from ehm_drake.model.plant import add_seated_human, model_directory
 from ehm_drake.model.sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
 from ehm_drake.systems.joints import cardan_to_generalized, rpy_rate_matrices
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("model")
+
 SEGMENTS = {"pelvis", "lower_torso", "middle_torso", "upper_torso", "neck", "head",
             "thigh_l", "thigh_r", "lower_leg_l", "lower_leg_r", "foot_l", "foot_r"}
 

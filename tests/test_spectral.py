@@ -17,6 +17,9 @@ from ehm_drake.analysis.spectral import (
     transmissibility,
 )
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("spectral")
+
 FN, ZETA = 4.0, 0.2
 WN = 2 * np.pi * FN
 

@@ -29,6 +29,9 @@ from ehm_drake.sweep import (
     run_sweep,
 )
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("sweep")
+
 #: Short runs: 0.5 s settle (the default variant starts from the equilibrium),
 #: 3 s of vibration with a 0.5 s onset.
 SHORT = {

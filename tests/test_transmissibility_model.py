@@ -19,6 +19,9 @@ from ehm_drake.simulation import (
     static_equilibrium,
 )
 
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("transmissibility_model")
+
 PAN = ("pelvis_pan", "thighs_pan")
 OFF = ("feet_floor", "lower_back_pad", "upper_back_pad")
 

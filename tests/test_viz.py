@@ -40,6 +40,9 @@ CHROMIUM_FLAGS = (
     "--disable-quic", "--no-first-run", "--disable-background-networking",
     "--disable-component-update", "--disable-sync", "--window-size=800,600",
 )
+
+#: Module fixtures: the module's tests stay on one xdist worker (built once).
+pytestmark = pytest.mark.xdist_group("viz")
 #: Console messages of SwiftShader itself (performance notes), not of the page.
 BENIGN_CONSOLE = ("GL Driver Message",)
 

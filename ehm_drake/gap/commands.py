@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..argtypes import int_at_least
 from .effects import EFFECT_NAMES
 
 
@@ -33,18 +34,6 @@ def _effect_list(text):
     return names
 
 
-def _int_at_least(lo):
-    def parse(text):
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-        if v < lo:
-            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {v}")
-        return v
-    return parse
-
-
 def add_gap_arguments(sub) -> None:
     p = sub.add_parser("diagnose", help="sim-to-real gap: where, which unmodelled effect, how "
                        "much it removes")
@@ -56,7 +45,7 @@ def add_gap_arguments(sub) -> None:
                    "params.yaml)")
     p.add_argument("--effects", type=_effect_list, metavar="A,B,...",
                    help=f"candidate effects (default all: {', '.join(EFFECT_NAMES)})")
-    p.add_argument("--workers", type=_int_at_least(1), default=None,
+    p.add_argument("--workers", type=int_at_least(1), default=None,
                    help="parallel processes (default: all cores)")
     p.add_argument("--no-cache", action="store_true", help="recompute the linear families "
                    "instead of reusing $EHM_DRAKE_CACHE (default ~/.cache/ehm_drake)")
@@ -70,13 +59,13 @@ def add_gap_arguments(sub) -> None:
                    help=f"effect(s) to hide, or none ({', '.join(EFFECT_NAMES)})")
     p.add_argument("--strength", type=float, default=None, metavar="S",
                    help="fraction [0, 1] of the effect's plausible range (default 1)")
-    p.add_argument("--seed", type=_int_at_least(0), required=True, metavar="N")
+    p.add_argument("--seed", type=int_at_least(0), required=True, metavar="N")
     p.add_argument("--levels", type=_csv_floats("--levels"), default=None, metavar="A,B",
                    help="seat acceleration RMS per test, m/s^2 (default 0.3,0.6)")
     p.add_argument("--directions", default="x,y,z", metavar="x,y,z")
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="record length per test, s (default 60)")
-    p.add_argument("--workers", type=_int_at_least(1), default=None)
+    p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--key", required=True, metavar="KEYFILE")
     p.add_argument("--quiet", action="store_true")
@@ -84,8 +73,8 @@ def add_gap_arguments(sub) -> None:
 
     p = sub.add_parser("blind", help="blind check of diagnose on synthetic trials with "
                        "hidden effects")
-    p.add_argument("--trials", type=_int_at_least(1), required=True, metavar="N")
-    p.add_argument("--seed", type=_int_at_least(0), required=True, metavar="S")
+    p.add_argument("--trials", type=int_at_least(1), required=True, metavar="N")
+    p.add_argument("--seed", type=int_at_least(0), required=True, metavar="S")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder (re-running "
                    "with the same settings resumes)")
     p.add_argument("--hidden", type=_effect_list, default=None, metavar="A,B,...",
@@ -97,7 +86,7 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S")
     p.add_argument("--p-none", type=float, default=0.15, help="fraction of no-effect trials")
     p.add_argument("--p-two", type=float, default=0.10, help="fraction of two-effect trials")
-    p.add_argument("--workers", type=_int_at_least(1), default=None)
+    p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
 
