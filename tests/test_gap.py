@@ -200,3 +200,62 @@ def test_every_effect_runs_in_the_time_domain(settled_effects):
         head = r.channel("head", "z")
         assert np.all(np.isfinite(head)), name
         assert 0.3 * head_ref < np.std(head) < 3.0 * head_ref, name
+
+
+# ---------------------------------------------------------------------------
+# Equivalent linearization of slipping restraints (Maxwell element)
+# ---------------------------------------------------------------------------
+
+
+def test_maxwell_equivalent_matches_the_describing_function():
+    from ehm_drake.gap.models import jenkins_factors, maxwell_equivalent
+
+    w = 2 * np.pi * 3.0
+    for r in (0.3, 1.0, 3.0):
+        gk, gh = jenkins_factors(np.array([r]))
+        k_m, lam = maxwell_equivalent(gk, gh, w)
+        K = k_m * 1j * w / (lam + 1j * w)  # complex stiffness / k at w
+        assert K.real == pytest.approx(gk, rel=1e-9)
+        assert K.imag == pytest.approx(gh, rel=1e-9)
+    # Below the limit (no slip): the restraint unchanged, no creep.
+    k_m, lam = maxwell_equivalent(1.0, 0.0, w)
+    assert k_m == 1.0 and lam == 0.0
+
+
+def test_creeping_slip_lets_the_body_slide_below_its_rate():
+    """A 10 kg mass on one restraint axis (k = 1e4 N/m) under a force: with
+    the slip state added at rate lam the mass slides under a slow force (its
+    displacement far beyond F/k; the spring's own deflection stays F/k, as in
+    a Maxwell element), while well above lam the restraint holds as before."""
+    from types import SimpleNamespace
+
+    from ehm_drake.gap.family import response
+    from ehm_drake.gap.models import Predictor
+
+    m, k, h, lam = 10.0, 1e4, 1e-3, 2 * np.pi * 1.0
+    # Symplectic Euler of m x'' = -k (x - s) + F: state [x, v].
+    A = np.array([[1 - h * h * k / m, h], [-h * k / m, 1.0]])
+    Bu = np.array([[h * h / m], [h / m]])  # per N of force
+    coupling = np.array([[h * h * k / m, 0.0], [h * k / m, 0.0]])  # dx+/ds, two axes
+    # Outputs: the position, then the deflection of both axes (axis 1 idle).
+    C = np.array([[1.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    fake = SimpleNamespace(
+        family=SimpleNamespace(K=np.zeros((1, 2)), h=h, directions=["k_shear:pelvis"],
+                               output_groups={"restraint_deflection": slice(1, 3)},
+                               family=SimpleNamespace(nominal=SimpleNamespace(
+                                   slip_coupling=coupling))),
+        _group_of=np.array(["pelvis"]))
+    mats = (A, Bu, np.zeros((2, 1)), C)
+    lam_groups = np.zeros(5)
+    same = Predictor._with_creep(fake, mats, lam_groups, np.zeros(1))
+    assert all(np.array_equal(a, b) for a, b in zip(same[:4], mats, strict=True))
+    lam_groups[0] = lam
+    A2, Bu2, Bw2, C2, K2 = Predictor._with_creep(fake, mats, lam_groups, np.zeros(1))
+    assert A2.shape == (4, 4) and C2.shape == (3, 4) and K2.shape == (1, 4)  # 2 slip states
+    f = np.array([0.02, 20.0])
+    H0 = np.abs(response(A, Bu, np.zeros((2, 1)), C, np.zeros((1, 2)), h, f, [0]))[:, :, 0]
+    H1 = np.abs(response(A2, Bu2, Bw2, C2, K2, h, f, [0]))[:, :, 0]
+    assert H0[0, 0] == pytest.approx(1 / k, rel=0.01)  # stuck: x = F / k
+    assert H1[0, 0] > 20 / k  # creeping: the mass slides
+    assert H1[0, 1] == pytest.approx(1 / k, rel=0.01)  # the spring carries F
+    assert H1[1, 0] == pytest.approx(H0[1, 0], rel=0.02)  # well above lam: unchanged

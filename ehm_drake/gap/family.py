@@ -80,7 +80,11 @@ class PointInfo:
 
 @dataclass
 class CutLinearization:
-    """x+ = A x + Bu a + Bw w, y = C x (reduced: slip states dropped)."""
+    """x+ = A x + Bu a + Bw w, y = C x (reduced: the restraints' slip states
+    dropped, as they do not move below the force limits; `slip_coupling` =
+    dx+/ds, the state update's dependence on the slip of each restraint
+    axis (columns in the order of the ``restraint_deflection`` output), for
+    the equivalent linearization of slipping restraints)."""
 
     A: np.ndarray
     Bu: np.ndarray
@@ -91,6 +95,7 @@ class CutLinearization:
     state_names: list[str]
     output_groups: dict
     y0: np.ndarray
+    slip_coupling: np.ndarray | None = None  # (n, 2 x points)
 
     @property
     def n(self) -> int:
@@ -141,9 +146,10 @@ def _linearize_cut(cut, cctx, cmap, central: bool = True) -> CutLinearization:
     y0 = np.concatenate([diagram.GetOutputPort(p).Eval(cctx) for p in GAP_OUTPUTS])
     if np.max(np.abs(D[:, 3:])) > 1e-9 * max(1.0, np.max(np.abs(C))):
         raise RuntimeError("gap outputs depend directly on the controller input")
+    slip = cmap.slice("shear_restraints")
     return CutLinearization(A[np.ix_(idx, idx)], B[idx, :3], B[idx, 3:], C[:, idx], K,
                             cut.params.simulation.time_step_s, [names[i] for i in idx],
-                            groups, y0)
+                            groups, y0, A[idx, slip.start:slip.stop])
 
 
 def _point_info(cut, cctx, lin: CutLinearization) -> PointInfo:
