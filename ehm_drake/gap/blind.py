@@ -214,9 +214,6 @@ def summarize(results: list[dict]) -> dict:
         "top1": frac([r["score"]["top1"] for r in det]),
         "top3": frac([r["score"]["top3"] for r in det]),
         "top1_all_effect_trials": frac([r["score"]["top1"] for r in with_effect]),
-        "undetectable_called_no_gap": frac(
-            [r["score"]["verdict"] == "no_significant_gap" for r in with_effect
-             if not r["score"]["detectable"]]),
         "false_alarm": frac([r["score"]["false_alarm"] for r in none]),
         "heldout_reduction_mean": frac(red),
         "heldout_reduction_median": float(np.median(red)) if red else None,
@@ -340,8 +337,6 @@ def markdown(summary: dict, results: list[dict]) -> str:
              f"{_p(ACCEPTANCE['top3'])} |",
              f"| top-1 accuracy (all effect trials) | {_p(s.get('top1_all_effect_trials'))} "
              f"| - |",
-             f"| undetectable trials called no_significant_gap | "
-             f"{_p(s.get('undetectable_called_no_gap'))} | - |",
              f"| false alarms (no-effect trials) | {_p(s['false_alarm'])} | <= "
              f"{_p(ACCEPTANCE['false_alarm'])} |",
              f"| held-out gap removed by the true effect (mean / median) | "
