@@ -1,6 +1,7 @@
 """Where a time step of `simulate` goes: the cost of each force-producing
-system, of the whole discrete update (plant contact solve + controllers),
-of the logged outputs, and of the plant's own step alone.
+system, of the whole discrete update (plant contact solve + controllers)
+and of the logged outputs (the plant's own step alone: the ceiling line of
+`bench_simulate.py`).
 
     python bench/bench_step_parts.py
 

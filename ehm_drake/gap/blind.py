@@ -193,8 +193,8 @@ def score(truth: dict, report: dict, detectable: bool | None = None) -> dict:
 
 def summarize(results: list[dict]) -> dict:
     det = [r for r in results if r["score"]["detectable"]]
-    with_effect = [r for r in results if r["score"].get("has_effect", r["score"]["detectable"])]
-    none = [r for r in results if not r["score"].get("has_effect", r["score"]["detectable"])]
+    with_effect = [r for r in results if r["score"]["has_effect"]]
+    none = [r for r in results if not r["score"]["has_effect"]]
     red = [r["score"]["heldout_reduction_true"] for r in det
            if r["score"]["heldout_reduction_true"] is not None]
     labels_t = sorted({r["score"]["truth_label"] for r in results})
@@ -265,7 +265,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         if rfile.is_file():
             res = json.loads(rfile.read_text())
             if "detectability" not in res:  # scored before the detectability check
-                _judge(res, data, key, diag, spec)
+                _judge(res, data, json.loads(key.read_text()),
+                       json.loads((diag / "report.json").read_text()), spec)
                 rfile.write_text(json.dumps(res, indent=1) + "\n")
             results.append(res)
             continue
@@ -284,13 +285,14 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             raise RuntimeError(f"diagnose failed on trial {tr['trial']} (exit {rc}); see "
                                f"{tdir / 'diagnose.log'}")
         report = json.loads((diag / "report.json").read_text())
-        truth = json.loads(key.read_text())["effects"]
+        key_data = json.loads(key.read_text())
+        truth = key_data["effects"]
         res = {"trial": tr["trial"], "hidden": tr["effects"],
                "truth_values": {n: v["values"] for n, v in truth.items()},
                "fitted": {e["effect"]: e["params"] for e in report["ranking"]
                           if e["effect"] in tr["effects"]},
                "synth_s": t_synth, "diagnose_s": report.get("timing_s", {}).get("total")}
-        _judge(res, data, key, diag, spec)
+        _judge(res, data, key_data, report, spec)
         rfile.write_text(json.dumps(res, indent=1) + "\n")
         results.append(res)
         if progress:
@@ -313,11 +315,10 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     return summary
 
 
-def _judge(res: dict, data: Path, key: Path, diag: Path, spec: BlindSpec) -> None:
+def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec) -> None:
     """Add the trial's detectability (from its key) and its score."""
-    det = detectability(data, json.loads(key.read_text()), workers=spec.workers)
+    det = detectability(data, key, workers=spec.workers)
     res["detectability"] = det
-    report = json.loads((diag / "report.json").read_text())
     res["score"] = score(res["hidden"], report, det["detectable"])
 
 
@@ -327,15 +328,14 @@ def _p(x) -> str:
 
 def markdown(summary: dict, results: list[dict]) -> str:
     s = summary
-    n_eff = s.get("effect_trials", s["detectable_trials"])
-    lines = [f"# Blind check: {s['trials']} trials ({n_eff} with hidden effects, "
+    lines = [f"# Blind check: {s['trials']} trials ({s['effect_trials']} with hidden effects, "
              f"{s['detectable_trials']} of them detectable; {s['no_effect_trials']} without)",
              "", "| metric | value | acceptance |", "|---|---|---|",
              f"| top-1 accuracy (detectable trials) | {_p(s['top1'])} | >= "
              f"{_p(ACCEPTANCE['top1'])} |",
              f"| top-3 accuracy (detectable trials) | {_p(s['top3'])} | >= "
              f"{_p(ACCEPTANCE['top3'])} |",
-             f"| top-1 accuracy (all effect trials) | {_p(s.get('top1_all_effect_trials'))} "
+             f"| top-1 accuracy (all effect trials) | {_p(s['top1_all_effect_trials'])} "
              f"| - |",
              f"| false alarms (no-effect trials) | {_p(s['false_alarm'])} | <= "
              f"{_p(ACCEPTANCE['false_alarm'])} |",
@@ -353,7 +353,7 @@ def markdown(summary: dict, results: list[dict]) -> str:
     for r in results:
         sc = r["score"]
         hid = ", ".join(f"{n} ({v:.2f})" for n, v in r["hidden"].items()) or "none"
-        det = "-" if not sc.get("has_effect", True) else ("yes" if sc["detectable"] else "no")
+        det = "-" if not sc["has_effect"] else ("yes" if sc["detectable"] else "no")
         lines.append(f"| {r['trial']} | {hid} | {det} | {sc['verdict']} | "
                      f"{sc['predicted_label']} | {', '.join(sc['ranking_top3'])} | "
                      f"{_p(sc['heldout_reduction_true'])} |")
