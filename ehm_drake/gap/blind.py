@@ -256,7 +256,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             raise BlindError(f"{out} holds a blind run with other settings; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
     trials = plan(spec)
-    results, t0 = [], time.perf_counter()
+    results, ran, busy = [], 0, 0.0
     for k, tr in enumerate(trials):
         tdir = out / f"trial_{tr['trial']:03d}"
         rfile = tdir / "result.json"
@@ -295,18 +295,17 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         _judge(res, data, key_data, report, spec)
         rfile.write_text(json.dumps(res, indent=1) + "\n")
         results.append(res)
+        ran, busy = ran + 1, busy + time.perf_counter() - t1  # ETA: trials run by this call
         if progress:
             s = res["score"]
             ok = s["top1"] or (not s["has_effect"] and not s["false_alarm"])
-            wall = time.perf_counter() - t0
-            done = sum(1 for r in results if "synth_s" in r)
             left = len(trials) - k - 1
             sys.stderr.write(
                 f"blind: trial {k + 1}/{len(trials)}: hidden {s['truth_label']} -> "
                 f"{s['verdict']} {s['predicted_label']} "
                 f"({'ok' if ok else 'MISS'}"
                 f"{'' if s['detectable'] or not s['has_effect'] else ', not detectable'}"
-                f"); eta {wall / max(done, 1) * left:.0f} s\n")
+                f"); eta {busy / ran * left:.0f} s\n")
     summary = summarize(results)
     summary["settings"] = settings
     (out / "blind.json").write_text(json.dumps({"summary": summary, "trials": results},
