@@ -22,49 +22,19 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .argtypes import int_at_least
+from .cli_common import UsageError, int_at_least, positive_float, prepare_output_dir
 from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import VARIANTS, ParameterError, load_params
 from .signals import KINDS, PAPER_RMS, SignalError
 from .sweep import add_sweep_arguments
 from .viz import add_viz_arguments, handle_viz
-
-
-class UsageError(ValueError):
-    """A bad command-line argument."""
-
-
-def _positive(name):
-    def parse(text):
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number, got {text!r}") from None
-        if not math.isfinite(v) or v <= 0:
-            raise argparse.ArgumentTypeError(f"{name} must be a positive finite number, got {v}")
-        return v
-    return parse
-
-
-def prepare_output_dir(path: str | Path, force: bool) -> Path:
-    """Create the output folder; refuse a non-empty existing one unless
-    `force` (then only the files this program writes are replaced)."""
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out} exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not force:
-        raise UsageError(f"output folder {out} exists and is not empty; use --force to "
-                         "write into it (files of the same name are replaced)")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
 
 
 def _measures(args) -> BodyMeasures:
@@ -89,10 +59,10 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="model variant of the paper (default: %(default)s)")
     p.add_argument("--params", metavar="FILE", help="parameter file (YAML/JSON), merged over "
                    "the defaults; a fit's output is accepted")
-    p.add_argument("--mass", type=_positive("--mass"), metavar="KG", help="body mass (kg)")
-    p.add_argument("--stature", type=_positive("--stature"), metavar="M",
+    p.add_argument("--mass", type=positive_float("--mass"), metavar="KG", help="body mass (kg)")
+    p.add_argument("--stature", type=positive_float("--stature"), metavar="M",
                    help="stature (m)")
-    p.add_argument("--sitting-height", type=_positive("--sitting-height"), metavar="M",
+    p.add_argument("--sitting-height", type=positive_float("--sitting-height"), metavar="M",
                    help="sitting height (m); default scales with stature")
     p.add_argument("--contact", choices=("point", "hydroelastic"),
                    help="contact model (default: from the parameters, point)")
@@ -422,15 +392,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="settle, vibrate, transmissibility and plots")
     p.add_argument("--direction", choices=("x", "y", "z", "xyz"), default="z",
                    help="excited seat axis (xyz: simultaneous, independent)")
-    p.add_argument("--rms", type=_positive("--rms"), default=PAPER_RMS, metavar="A",
+    p.add_argument("--rms", type=positive_float("--rms"), default=PAPER_RMS, metavar="A",
                    help="seat acceleration RMS per axis, m/s^2 (paper: %(default)s)")
-    p.add_argument("--duration", type=_positive("--duration"), default=60.0, metavar="S",
+    p.add_argument("--duration", type=positive_float("--duration"), default=60.0, metavar="S",
                    help="vibration time after settling, s (default %(default)s)")
     p.add_argument("--seed", type=int_at_least(0), default=0, metavar="N",
                    help="random seed of the excitation")
     p.add_argument("--excitation", choices=KINDS, default="random",
                    help="signal type (default random 0.1-12 Hz)")
-    p.add_argument("--frequency", type=_positive("--frequency"), default=4.0, metavar="HZ",
+    p.add_argument("--frequency", type=positive_float("--frequency"), default=4.0, metavar="HZ",
                    help="frequency of --excitation sine")
     p.add_argument("--csv", metavar="FILE", help="measured seat acceleration for "
                    "--excitation csv (columns t, seat_ax, seat_ay, seat_az)")
@@ -448,7 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("auto", "fd", "autodiff"), default="auto",
                    help="linearization: Drake AutoDiff where supported, else finite "
                    "differences (auto)")
-    p.add_argument("--max-freq", type=_positive("--max-freq"), default=15.0, metavar="HZ",
+    p.add_argument("--max-freq", type=positive_float("--max-freq"), default=15.0, metavar="HZ",
                    help="list modes up to this frequency (default %(default)s)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--force", action="store_true")
@@ -466,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "report the error on it: direction=z, segment=knee_l, level=0.3")
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     p.add_argument("--no-verify", action="store_true", help="skip the time-domain check")
-    p.add_argument("--verify-duration", type=_positive("--verify-duration"), default=60.0,
+    p.add_argument("--verify-duration", type=positive_float("--verify-duration"), default=60.0,
                    metavar="S", help="simulated seconds per direction in the check")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--force", action="store_true")

@@ -7,21 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..argtypes import int_at_least
+from ..cli_common import csv_floats, int_at_least, prepare_output_dir
 from .effects import EFFECT_NAMES
-
-
-def _csv_floats(name):
-    def parse(text):
-        try:
-            vals = tuple(float(t) for t in text.split(",") if t.strip())
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"{name} must be comma-separated numbers, got {text!r}") from None
-        if not vals:
-            raise argparse.ArgumentTypeError(f"{name} is empty")
-        return vals
-    return parse
 
 
 def _effect_list(text):
@@ -60,7 +47,7 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--strength", type=float, default=None, metavar="S",
                    help="fraction [0, 1] of the effect's plausible range (default 1)")
     p.add_argument("--seed", type=int_at_least(0), required=True, metavar="N")
-    p.add_argument("--levels", type=_csv_floats("--levels"), default=None, metavar="A,B",
+    p.add_argument("--levels", type=csv_floats("--levels"), default=None, metavar="A,B",
                    help="seat acceleration RMS per test, m/s^2 (default 0.3,0.6)")
     p.add_argument("--directions", default="x,y,z", metavar="x,y,z")
     p.add_argument("--duration", type=float, default=None, metavar="S",
@@ -81,7 +68,7 @@ def add_gap_arguments(sub) -> None:
                    help="effects the trials may hide (default all)")
     p.add_argument("--effects", type=_effect_list, default=None, metavar="A,B,...",
                    help="candidates diagnose may propose (default all)")
-    p.add_argument("--levels", type=_csv_floats("--levels"), default=None, metavar="A,B")
+    p.add_argument("--levels", type=csv_floats("--levels"), default=None, metavar="A,B")
     p.add_argument("--directions", default="x,y,z", metavar="x,y,z")
     p.add_argument("--duration", type=float, default=None, metavar="S")
     p.add_argument("--p-none", type=float, default=0.15, help="fraction of no-effect trials")
@@ -96,7 +83,6 @@ def _directions(text: str) -> str:
 
 
 def cmd_diagnose(args) -> int:
-    from ..cli import prepare_output_dir
     from ..params import load_params
     from .diagnose import diagnose
     from .report import write_report
