@@ -1,0 +1,6 @@
+"""ehm_drake: an efficient seated human body model on Drake (see README.md)."""
+
+# The gap diagnosis' candidate effects register as model extensions (see
+# ehm_drake.model.extensions), so an `effects` mapping resolves wherever the
+# model is built; the module is light (no Drake at import).
+from .gap import effects as _effects  # noqa: F401

@@ -138,7 +138,7 @@ def _transmissibility_outputs(result, signal, out: Path, files: list) -> dict:
     """frf.csv, apparent_mass.csv and the transmissibility figures of a run."""
     from .analysis.apparent_mass import apparent_mass_table
     from .analysis.figures import plot_cases
-    from .analysis.spectral import transmissibility
+    from .analysis.transmissibility import transmissibility
 
     vib = result.after(signal.settle_time)
     frf = transmissibility(vib.to_timeseries())
@@ -183,9 +183,9 @@ def _print_summary(summary: dict) -> None:
 
 
 def cmd_transmissibility(args) -> int:
-    from .analysis.dataio import check_units, read_data_dir
     from .analysis.figures import plot_cases
-    from .analysis.spectral import transmissibility
+    from .analysis.formats import check_units, read_data_dir
+    from .analysis.transmissibility import transmissibility
 
     frf, ts = read_data_dir(args.data)
     out = prepare_output_dir(args.out, args.force)
@@ -215,7 +215,7 @@ def _acceleration_from_displacement(t, d):
 
 def cmd_comfort(args) -> int:
     from .analysis.comfort import comfort_metrics
-    from .analysis.dataio import read_data_dir
+    from .analysis.formats import read_data_dir
 
     _, ts = read_data_dir(args.data)
     if ts is None:
@@ -318,8 +318,8 @@ def cmd_modes(args) -> int:
 
 
 def cmd_fit(args) -> int:
-    from .analysis.dataio import read_data_dir
-    from .analysis.spectral import transmissibility
+    from .analysis.formats import read_data_dir
+    from .analysis.transmissibility import transmissibility
     from .identification.fit import (
         fit,
         load_weights,

@@ -5,6 +5,7 @@
                  --> joint PID ------------+--> sum --> plant.applied_generalized_force
                  --> shear restraints -----+
                  --> head-in-space --------+
+                 --> extensions' forces ---+
     plant --state--> body channels (+ seat displacement) --> "channels"
 
 `build_diagram(params, ...)` returns an `EhmDiagram` holding the Diagram and
@@ -16,6 +17,12 @@ Exported outputs: ``channels`` (30), ``seat_forces`` (12), ``state``
 ``his_torque`` (3), ``seat_acceleration``, ``seat_displacement``,
 ``restraint_normal_displacement`` and ``restraint_deflection`` (per
 restraint point; see `ShearRestraints`).
+
+Model extensions (`effects`: the gap diagnosis' candidate effects) enter
+through the hooks of `ehm_drake.model.extensions.ModelExtension`: the
+plant's (`add_seated_human`), the shear restraints' options, extra force
+systems summed into the generalized force, and a transform of the
+controllers' feedback; this module calls them and names none.
 """
 
 from __future__ import annotations
@@ -24,15 +31,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, DiscreteTimeDelay, PassThrough, VectorLogSink
+from pydrake.systems.primitives import Adder, PassThrough, VectorLogSink
 
 from .model.anthropometry import REFERENCE, BodyMeasures
+from .model.extensions import (
+    DiagramParts,
+    ModelExtension,
+    merge_options,
+    validate_extensions,
+)
 from .model.plant import HumanPlant, add_seated_human, passive_stiffness_vector, pid_vectors
 from .params import ModelParams, apply_variant
 from .signals import SeatSignal
 from .systems.excitation import SeatExcitation
 from .systems.his import HeadInSpace
-from .systems.joints import CoContraction, JointPid, PassiveJoints
+from .systems.joints import JointPid, PassiveJoints
 from .systems.outputs import (
     CHANNEL_NAMES,
     SEGMENTS,
@@ -68,6 +81,11 @@ class EhmDiagram:
     @property
     def plant(self):
         return self.hp.plant
+
+    @property
+    def extensions(self) -> tuple[ModelExtension, ...]:
+        """The model extensions of `effects` (see `ehm_drake.model.extensions`)."""
+        return self.hp.extensions
 
     def plant_context(self, root_context):
         return self.hp.plant.GetMyContextFromRoot(root_context)
@@ -114,20 +132,21 @@ def build_diagram(
     seat_forces : add the `SeatForces` measurement (contact results: a
         second contact solve per evaluation; linearizations that only need
         the body channels leave it out, as does AutoDiff, which it blocks).
-    effects : candidate unmodelled effects to add, {name: {parameter:
-        value}} (see `ehm_drake.gap.effects`; default none).
+    effects : model extensions to add, {name: {parameter: value}} (the
+        candidate unmodelled effects of `ehm_drake.gap.effects`; default
+        none).
     controller_input : export an input port ``controller_state`` (plant
         [q; v]) that the PID and head-in-space controllers read instead of
         the plant state (the feedback loop cut open, for the gap
-        diagnosis' delayed-feedback linearization).
+        diagnosis' delayed-feedback linearization; the extensions'
+        feedback transforms are then left out).
     """
-    from .gap.effects import validate_effects
-
     params = apply_variant(params, variant)
-    effects = validate_effects(effects)
+    effects = validate_extensions(effects)
     h = params.simulation.time_step_s
     builder = DiagramBuilder()
     hp = add_seated_human(builder, params, measures, effects)
+    extensions = hp.extensions
     plant = hp.plant
     layout = hp.layout
     sys = {}
@@ -164,7 +183,7 @@ def build_diagram(
     points = restraint_points(hp)
     restraints = builder.AddNamedSystem(
         "shear_restraints",
-        ShearRestraints(plant, points, _restraint_vector(params, points, effects), h))
+        ShearRestraints(plant, points, _restraint_vector(params, points, extensions), h))
     # Head-in-space control.
     gain = 1.0 if params.his.enabled else 0.0
     his = builder.AddNamedSystem(
@@ -172,29 +191,21 @@ def build_diagram(
         HeadInSpace(plant, "head", "upper_torso", gain * np.array(params.his.kp),
                     gain * np.array(params.his.kd)))
     forces = [passive, pid, restraints, his, inertial]
-    if "cocontraction" in effects:
-        cc = builder.AddNamedSystem("cocontraction", CoContraction(
-            layout, effects["cocontraction"]["c_per_ms2"], cocontraction_gains(params, layout),
-            h, effects["cocontraction"]["tau_s"]))
-        builder.Connect(accel_out, cc.GetInputPort("seat_acceleration"))
-        forces.append(cc)
-        sys["cocontraction"] = cc
+    # The extensions' force systems (their "state" input is connected below).
+    parts = DiagramParts(builder, hp, params, h, state, accel_out, disp_out, sys)
+    for ext in extensions:
+        forces += ext.add_force_systems(parts)
     adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
-    # The controllers' view of the body: the plant state, delayed by the
-    # reflex loop, or an exported input (the loop cut open).
+    # The controllers' view of the body: the plant state, as the extensions
+    # transform it (e.g. delayed), or an exported input (the loop cut open).
     feedback = state
-    tau = effects.get("reflex_delay", {}).get("tau_s", 0.0)
     if controller_input:
         fb_in = builder.AddNamedSystem("controller_state_input", PassThrough(layout.nq + layout.nv))
         builder.ExportInput(fb_in.get_input_port(), "controller_state")
         feedback = fb_in.get_output_port()
-    elif tau > 0:
-        steps = reflex_delay_steps(tau, h)
-        delay = builder.AddNamedSystem("reflex_delay", DiscreteTimeDelay(
-            h, steps, layout.nq + layout.nv))
-        builder.Connect(state, delay.get_input_port())
-        feedback = delay.get_output_port()
-        sys["reflex_delay"] = delay
+    else:
+        for ext in extensions:
+            feedback = ext.transform_feedback(parts, feedback)
     for i, s in enumerate(forces):
         builder.Connect(feedback if s in (pid, his) else state, s.GetInputPort("state"))
         builder.Connect(s.GetOutputPort("generalized_force"), adder.get_input_port(i))
@@ -248,39 +259,11 @@ def build_diagram(
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
 
 
-#: Seat parts whose contact the seat_foam_stiffening / seat_friction /
-#: backrest_separation effects act on.
-SEAT_SURFACES = ("pan", "lower_pad", "upper_pad")
-BACK_PADS = ("lower_pad", "upper_pad")
-#: Joint groups whose active stiffness rises with co-contraction.
-COCONTRACTION_GROUPS = ("lumbar", "thoracic", "neck", "hips")
-
-
-def reflex_delay_steps(tau: float, h: float) -> int:
-    """The delay in whole time steps (at least one)."""
-    return max(1, int(round(tau / h)))
-
-
-def cocontraction_gains(params: ModelParams, layout) -> np.ndarray:
-    """Active stiffness kp per rotational DoF that co-contraction scales
-    (trunk, neck and hip DoFs; 0 elsewhere)."""
-    kp = pid_vectors(params, layout)["kp"]
-    return np.where([g in COCONTRACTION_GROUPS for g in layout.groups], kp, 0.0)
-
-
-def _restraint_vector(params: ModelParams, points, effects: dict) -> np.ndarray:
-    """The shear restraints' parameters with the seat effects applied."""
-    gated = BACK_PADS if "backrest_separation" in effects else ()
-    cubic = friction = None
-    if "seat_foam_stiffening" in effects:
-        # k3 = k gamma (gamma per mm^2 -> per m^2): k (1 + 3 gamma d^2) tangent.
-        gamma = effects["seat_foam_stiffening"]["gamma_per_mm2"] * 1e6
-        cubic = [getattr(params.contact, p.pair).stiffness * gamma if p.part in SEAT_SURFACES
-                 else 0.0 for p in points]
-    if "seat_friction" in effects:
-        mu = effects["seat_friction"]["mu"]
-        friction = [mu if p.part in SEAT_SURFACES else 0.0 for p in points]
-    return restraint_parameters(params, points, gated, cubic, friction)
+def _restraint_vector(params: ModelParams, points,
+                      extensions: tuple[ModelExtension, ...]) -> np.ndarray:
+    """The shear restraints' parameters with the extensions' options."""
+    return restraint_parameters(params, points,
+                                **merge_options(extensions, "restraint_options", params, points))
 
 
 __all__ = ["EhmDiagram", "build_diagram", "CHANNEL_NAMES", "SEAT_FORCE_NAMES"]

@@ -3,8 +3,14 @@
 The values live in one place, the packaged parameter file
 `ehm_drake/data/default_params.yaml`, where each carries its source or
 reason.  A user file (YAML or JSON) may give any subset of the keys; it is
-merged over the defaults.  Unknown keys, wrong types, NaN and negative
-stiffness/damping/gains are rejected with an error that names the key.
+merged over the defaults.
+
+Typing and merging are Drake's: `pydrake.common.yaml.yaml_load_typed` reads
+the file into the dataclasses below, over the (cached) default instance, and
+rejects unknown keys and wrong types.  Admissibility is one table, `RANGES`
+(plus `CHOICES`), checked by `validate`.  Every error is a ParameterError of
+one line naming the key (and, from `load_params`, the file) and, for a value
+out of range, the allowed range.
 
 Units: SI throughout; angles in rad, torques in N m, stiffness in N m/rad
 (rotational) or N/m (translational), damping in N m s/rad or N s/m.
@@ -14,9 +20,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import fnmatch
+import functools
 import json
 import math
 import typing
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
@@ -185,148 +194,356 @@ def _to_builtin(x):
 
 
 # ---------------------------------------------------------------------------
-# Loading and validation
+# Admissible ranges: the one table validate() checks against
 # ---------------------------------------------------------------------------
 
 
-def _build(cls, data, path: str):
-    if not isinstance(data, dict):
-        raise ParameterError(f"{path or 'parameters'}: expected a mapping, got {data!r}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        where = f"{path}." if path else ""
-        raise ParameterError(
-            f"unknown parameter key(s): {', '.join(where + u for u in unknown)} "
-            f"(known here: {', '.join(names)})"
-        )
-    missing = [n for n in names if n not in data]
-    if missing:
-        where = f"{path}." if path else ""
-        raise ParameterError(f"missing parameter key(s): {', '.join(where + m for m in missing)}")
-    kwargs = {}
-    for name in names:
-        key = f"{path}.{name}" if path else name
-        kwargs[name] = _convert(hints[name], data[name], key)
-    return cls(**kwargs)
+@dataclass(frozen=True)
+class Range:
+    """Admissible values of the parameters whose dotted key matches `pattern`
+    (`fnmatch`: `*` stands for a group name; the components of a vector share
+    its range).  Every number must be finite and not negative in any case; the
+    range may restrict that further."""
+
+    pattern: str
+    unit: str
+    lo: float = 0.0
+    #: Upper bound, or a function of the parameters (a bound that depends on
+    #: another key).
+    hi: float | Callable[[ModelParams], float] = math.inf
+    #: True: `lo` itself is not allowed ("> lo"; lo = 0: "must be positive").
+    lo_open: bool = False
+    #: Why, for the message (source or hint).
+    reason: str = ""
+    #: The range holds only under this condition: (text, test(params, group)),
+    #: group being the key's parent ("restraints.pelvis_pan"); the text may
+    #: name it as "{group}".  Otherwise only the "not negative" rule holds.
+    when: tuple[str, Callable[[ModelParams, str], bool]] | None = None
 
 
-def _convert(tp, value, key):
-    if dataclasses.is_dataclass(tp):
-        return _build(tp, value, key)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ParameterError(f"{key}: expected true/false, got {value!r}")
-        return value
-    if tp is float:
-        return _number(value, key)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ParameterError(f"{key}: expected a string, got {value!r}")
-        return value
-    if typing.get_origin(tp) is tuple:
-        n = len(typing.get_args(tp))
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            value = [value] * n
-        if not isinstance(value, (list, tuple)) or len(value) != n:
-            raise ParameterError(f"{key}: expected a list of {n} numbers, got {value!r}")
-        return tuple(_number(v, f"{key}[{i}]") for i, v in enumerate(value))
-    raise TypeError(tp)  # pragma: no cover
+def _dotted(obj, path: str):
+    for name in path.split("."):
+        obj = getattr(obj, name)
+    return obj
 
 
-def _number(value, key) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParameterError(f"{key}: expected a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ParameterError(f"{key}: must be finite, got {value}")
-    return value
+_IF_INTEGRATOR = ("pid.integrator is true", lambda p, group: p.pid.integrator)
+_IF_STIFF = ("{group}.stiffness > 0", lambda p, group: _dotted(p, group).stiffness > 0)
+
+#: Physical admissibility of every parameter, first match wins (the last row
+#: catches any key without its own).  These are the limits of a model that
+#: can be built and simulated, not physiological plausibility: the plausible
+#: ranges that bound a fit are in `data/fit_parameters.yaml` (each within
+#: these; tests/test_params.py checks it).
+RANGES: tuple[Range, ...] = (
+    Range("passive.*.stiffness", "N m/rad"),
+    Range("passive.*.damping", "N m s/rad"),
+    Range("passive.spine_axial_stiffness", "N/m"),
+    Range("passive.spine_axial_damping", "N s/m"),
+    Range("pid.*.kp", "N m/rad"),
+    Range("pid.*.kd", "N m s/rad"),
+    Range("pid.*.integral_time_s", "s", lo_open=True, when=_IF_INTEGRATOR,
+          reason="Ki = (kp + passive k)/integral_time_s"),
+    Range("pid.*.integral_torque_limit", "N m"),
+    Range("his.kp", "N m/rad"),
+    Range("his.kd", "N m s/rad"),
+    Range("contact.*.stiffness", "N/m", lo_open=True,
+          reason="a contact pair without stiffness does not carry the body"),
+    Range("contact.*.damping", "N s/m"),
+    Range("contact.hydroelastic_resolution_m", "m", lo_open=True,
+          reason="mesh resolution of the compliant ellipsoids"),
+    Range("restraints.*.stiffness", "N/m"),
+    Range("restraints.*.damping", "N s/m"),
+    Range("restraints.*.force_limit", "N", lo_open=True, when=_IF_STIFF,
+          reason="beyond this force the restraint slips"),
+    Range("simulation.time_step_s", "s", 1e-5, 0.01,
+          reason="1 ms as in the paper; give seconds, not milliseconds"),
+    Range("simulation.settle_time_s", "s"),
+    Range("simulation.onset_time_s", "s"),
+    Range("simulation.output_rate_hz", "Hz", 100.0, lambda p: 1.0 / p.simulation.time_step_s,
+          reason="at least 100 Hz, at most the simulation rate 1/simulation.time_step_s"),
+    Range("variants.high_stiffness_factor", "", 1.0,
+          reason="factor raising the passive joint stiffness"),
+    Range("*", ""),
+)
+
+#: The allowed values of the text parameters.
+CHOICES: dict[str, tuple[str, ...]] = {"contact.model": ("point", "hydroelastic")}
 
 
-def _walk_numbers(obj, path=""):
+@functools.cache
+def range_of(key: str) -> Range:
+    """The row of RANGES for a dotted key (without a vector index)."""
+    return next(r for r in RANGES if fnmatch.fnmatchcase(key, r.pattern))
+
+
+def _allowed(r: Range, params: ModelParams, applies: bool) -> str:
+    """The allowed range as text, e.g. "1e-05..0.01 s", "> 0 N", ">= 1"."""
+    if not applies:
+        text = ">= 0"
+    else:
+        hi = r.hi(params) if callable(r.hi) else r.hi
+        text = (f"{'>' if r.lo_open else '>='} {r.lo:g}" if hi == math.inf
+                else f"{r.lo:g}..{hi:g}")
+    return f"{text} {r.unit}".rstrip()
+
+
+def _range_error(key: str, base: str, v: float, params: ModelParams) -> str | None:
+    """The message if `v` (at `key`, whose vector is `base`) is out of its range."""
+    r = range_of(base)
+    group = base.rpartition(".")[0]
+    applies = r.when is None or r.when[1](params, group)
+    hi = r.hi(params) if callable(r.hi) else r.hi
+    if v >= 0 and (not applies or (v > r.lo if r.lo_open else v >= r.lo) and v <= hi):
+        return None
+    allowed = _allowed(r, params, applies)
+    why = f": {r.reason}" if r.reason else ""
+    if v < 0:
+        return f"{key} = {v!r}: must not be negative (allowed {allowed}{why})"
+    if r.when is not None:
+        what = "positive" if r.lo == 0 and r.lo_open and hi == math.inf else f"within {allowed}"
+        return (f"{key} must be {what} when {r.when[0].format(group=group)}, got {v!r} "
+                f"(allowed {allowed}{why})")
+    return f"{key} = {v!r}: allowed {allowed}" + (f" ({r.reason})" if r.reason else "")
+
+
+def _walk_values(obj, path=""):
+    """(key, vector key, value) of every leaf value, in file order."""
     if dataclasses.is_dataclass(obj):
         for f in fields(obj):
-            yield from _walk_numbers(getattr(obj, f.name), f"{path}.{f.name}" if path else f.name)
+            yield from _walk_values(getattr(obj, f.name), f"{path}.{f.name}" if path else f.name)
     elif isinstance(obj, tuple):
         for i, v in enumerate(obj):
-            yield f"{path}[{i}]", v
-    elif isinstance(obj, float):
-        yield path, obj
+            yield f"{path}[{i}]", path, v
+    else:
+        yield path, path, obj
 
 
 def validate(params: ModelParams) -> ModelParams:
-    """Check physical admissibility; raise ParameterError naming the key."""
-    for key, v in _walk_numbers(params):
-        if v < 0:
-            raise ParameterError(f"{key} = {v}: must not be negative")
-    s = params.simulation
-    if not 1e-5 <= s.time_step_s <= 0.01:
-        raise ParameterError(
-            f"simulation.time_step_s = {s.time_step_s}: expected 1e-5..0.01 s "
-            "(1 ms as in the paper; give seconds, not milliseconds)"
-        )
-    if s.output_rate_hz < 100 or s.output_rate_hz > 1.0 / s.time_step_s:
-        raise ParameterError(
-            f"simulation.output_rate_hz = {s.output_rate_hz}: expected 100 Hz up to "
-            f"the simulation rate {1.0 / s.time_step_s:g} Hz"
-        )
-    if params.contact.model not in ("point", "hydroelastic"):
-        raise ParameterError(
-            f"contact.model = {params.contact.model!r}: expected 'point' or 'hydroelastic'"
-        )
-    for name in CONTACT_PAIRS:
-        pair = getattr(params.contact, name)
-        if pair.stiffness <= 0:
-            raise ParameterError(f"contact.{name}.stiffness must be positive")
-        r = getattr(params.restraints, name)
-        if r.stiffness > 0 and r.force_limit <= 0:
-            raise ParameterError(f"restraints.{name}.force_limit must be positive")
-    for group in PID_GROUPS:
-        g = getattr(params.pid, group)
-        if params.pid.integrator and g.integral_time_s <= 0:
-            raise ParameterError(
-                f"pid.{group}.integral_time_s must be positive when pid.integrator is true"
-            )
-    if params.contact.hydroelastic_resolution_m <= 0:
-        raise ParameterError("contact.hydroelastic_resolution_m must be positive")
-    if params.variants.high_stiffness_factor < 1:
-        raise ParameterError("variants.high_stiffness_factor must be >= 1")
+    """Check every value against RANGES and CHOICES (and finiteness); raise
+    ParameterError naming the key, the value and the allowed range."""
+    values = list(_walk_values(params))
+    for key, base, v in values:
+        if _is_number(v) and not math.isfinite(v):
+            r = range_of(base)
+            applies = r.when is None or r.when[1](params, base.rpartition(".")[0])
+            raise ParameterError(f"{key}: must be finite, got {v} "
+                                 f"(allowed {_allowed(r, params, applies)})")
+    for key, base, v in values:
+        if _is_number(v):
+            msg = _range_error(key, base, v, params)
+            if msg:
+                raise ParameterError(msg)
+        elif isinstance(v, str) and base in CHOICES and v not in CHOICES[base]:
+            raise ParameterError(f"{key} = {v!r}: allowed "
+                                 + " or ".join(repr(c) for c in CHOICES[base]))
     return params
 
 
-def _merge(base: dict, over: dict, path="") -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        key = f"{path}.{k}" if path else k
-        if k not in base:
-            known = ", ".join(base) if isinstance(base, dict) else ""
-            raise ParameterError(f"unknown parameter key: {key} (known here: {known})")
-        if isinstance(base[k], dict):
-            if not isinstance(v, dict):
-                raise ParameterError(f"{key}: expected a mapping, got {v!r}")
-            out[k] = _merge(base[k], v, key)
+# ---------------------------------------------------------------------------
+# Loading: Drake's yaml_load_typed does the typing and the merge over the defaults
+# ---------------------------------------------------------------------------
+
+
+@functools.cache
+def _hints(cls) -> dict:
+    return typing.get_type_hints(cls)
+
+
+def _vector_size(tp) -> int | None:
+    return len(typing.get_args(tp)) if typing.get_origin(tp) is tuple else None
+
+
+@functools.cache
+def _schema(cls):
+    """`cls` as Drake's yaml_load_typed reads it: the same fields, with the
+    fixed-size vectors (tuples, which it does not read) as list[float], and
+    defaults (None, or the empty group) so that it can start from scratch."""
+    spec = []
+    for f in fields(cls):
+        tp = _hints(cls)[f.name]
+        if dataclasses.is_dataclass(tp):
+            spec.append((f.name, _schema(tp), dataclasses.field(default_factory=_schema(tp))))
         else:
+            spec.append((f.name, list[float] if _vector_size(tp) else tp, None))
+    return dataclasses.make_dataclass(cls.__name__, spec)
+
+
+def _freeze(obj, cls):
+    """The loaded `obj` (a schema instance, or `cls` with lists) as `cls`."""
+    kwargs = {}
+    for f in fields(cls):
+        v, tp = getattr(obj, f.name), _hints(cls)[f.name]
+        if dataclasses.is_dataclass(tp):
+            v = _freeze(v, tp)
+        elif _vector_size(tp):
+            v = tuple(v)
+        kwargs[f.name] = v
+    return cls(**kwargs)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _reads_as_number(v) -> bool:
+    """A number, or text that Drake's loader reads as one (as "8.0e4", which
+    YAML 1.1 leaves a string)."""
+    if isinstance(v, str):
+        try:
+            float(v)
+        except ValueError:
+            return False
+        return True
+    return _is_number(v)
+
+
+def _expand(data, cls, path: str) -> dict:
+    """What yaml_load_typed cannot do itself: check that groups are mappings
+    and vectors lists of their size, and expand one number given for a
+    vector to all its components.  Returns a new mapping (keys unknown to
+    `cls` are kept for the loader to report)."""
+    if not isinstance(data, Mapping):
+        raise ParameterError(f"{path or 'parameters'}: expected a mapping, got {data!r}")
+    out = dict(data)
+    for name, value in data.items():
+        tp = _hints(cls).get(name)
+        key = f"{path}.{name}" if path else str(name)
+        if tp is not None and dataclasses.is_dataclass(tp):
+            out[name] = _expand(value, tp, key)
+        elif tp is not None and (n := _vector_size(tp)):
+            if _reads_as_number(value):
+                out[name] = [value] * n
+            elif not isinstance(value, (list, tuple)) or len(value) != n:
+                raise ParameterError(f"{key}: expected a list of {n} numbers, got {value!r}")
+    return out
+
+
+_EXPECTED = {float: "a number", bool: "true/false", str: "a string"}
+
+
+@functools.cache
+def _leaf_schema(tp):
+    """A one-field schema to load a single value of type `tp`."""
+    return dataclasses.make_dataclass(f"Leaf_{tp.__name__}",
+                                      [("value", tp, dataclasses.field(default=tp()))])
+
+
+def _refused_key(data: Mapping, cls, path: str = "") -> str | None:
+    """One line naming the first key of `data` (already `_expand`ed) that
+    Drake's loader refuses, or None.
+
+    Drake's own messages name only the innermost field ('damping', or '_'
+    for a list item), so after a failed load each value is loaded again on
+    its own, against its field's type, through the same public loader: the
+    loader decides what is refused, this names where."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    names = [f.name for f in fields(cls)]
+    unknown = [str(k) for k in data if k not in names]
+    if unknown:
+        where = f"{path}." if path else ""
+        return (f"unknown parameter key: {', '.join(where + u for u in unknown)} "
+                f"(known here: {', '.join(names)})")
+    for name, value in data.items():
+        key = f"{path}.{name}" if path else name
+        tp = _hints(cls)[name]
+        if dataclasses.is_dataclass(tp):
+            if msg := _refused_key(value, tp, key):
+                return msg
+            continue
+        items = ([(f"{key}[{i}]", v) for i, v in enumerate(value)] if _vector_size(tp)
+                 else [(key, value)])
+        leaf = float if _vector_size(tp) else tp
+        for where, v in items:
+            try:
+                yaml_load_typed(schema=_leaf_schema(leaf),
+                                data=json.dumps({"value": v}, default=repr))
+            except (RuntimeError, ValueError, TypeError, OverflowError):
+                return f"{where}: expected {_EXPECTED[leaf]}, got {v!r}"
+    return None
+
+
+_MISSING = object()
+
+
+def _same(v, d) -> bool:
+    if isinstance(v, (list, tuple)) and isinstance(d, list):
+        return len(v) == len(d) and all(map(_same, v, d))
+    return type(v) is type(d) and repr(v) == repr(d)
+
+
+def _changes(data: Mapping, default: dict) -> dict:
+    """`data` without the values equal to `default`'s in type and value: the
+    loader keeps those anyway, and has less text to parse (callers such as
+    the sweep and the fit pass complete parameter sets)."""
+    out = {}
+    for k, v in data.items():
+        d = default.get(k, _MISSING) if isinstance(k, str) else _MISSING
+        if isinstance(v, Mapping) and isinstance(d, dict):
+            if sub := _changes(v, d):
+                out[k] = sub
+        elif d is _MISSING or not _same(v, d):
             out[k] = v
     return out
+
+
+def _typed(data: Mapping, *, over_defaults: bool = True) -> ModelParams:
+    """`data` typed by Drake and validated: merged over the defaults, or
+    (over_defaults=False, for the defaults themselves) complete."""
+    from pydrake.common.yaml import yaml_load_typed
+
+    data = _expand(data, ModelParams, "")
+    defaults = _defaults() if over_defaults else None
+    if over_defaults:
+        data = _changes(data, _default_dict())
+    text = json.dumps(data, default=repr)
+    try:
+        # pydrake's yaml_load_typed reads text (JSON is YAML), not a mapping.
+        loaded = yaml_load_typed(schema=_schema(ModelParams), data=text, defaults=defaults,
+                                 allow_schema_with_no_yaml=over_defaults)
+    except (RuntimeError, ValueError, TypeError, OverflowError) as e:
+        raise ParameterError(_refused_key(data, ModelParams)
+                             or " ".join(str(e).split())) from None
+    return validate(_freeze(loaded, ModelParams))
 
 
 def default_params_path() -> Path:
     return Path(str(resources.files("ehm_drake") / "data" / "default_params.yaml"))
 
 
-def _read_mapping(path: Path) -> dict:
+@functools.cache
+def _defaults() -> ModelParams:
+    """The packaged defaults, parsed once per process (copies are handed out)."""
+    try:
+        return _typed(read_params_mapping(default_params_path()), over_defaults=False)
+    except ParameterError as e:
+        raise ParameterError(f"{default_params_path()}: {e}") from None
+
+
+@functools.cache
+def _default_dict() -> dict:
+    return _defaults().to_dict()
+
+
+def read_params_mapping(path: Path) -> dict:
+    """The raw mapping of a YAML/JSON parameter file (a fit result's
+    "params" unwrapped); errors name the file, on one line."""
     path = Path(path)
     if not path.is_file():
         raise ParameterError(f"parameter file not found: {path}")
     text = path.read_text()
+    is_json = path.suffix.lower() == ".json"
     try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            data = yaml.safe_load(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as e:
-        raise ParameterError(f"{path}: not valid {'JSON' if path.suffix == '.json' else 'YAML'}: {e}") from e
+        data = json.loads(text) if is_json else yaml.safe_load(text)
+    except json.JSONDecodeError as e:
+        raise ParameterError(f"{path}: not valid JSON: {e}") from None
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        what = ", ".join(filter(None, (getattr(e, "context", None), getattr(e, "problem", None))))
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise ParameterError(f"{path}: not valid YAML: {where}"
+                             + " ".join((what or str(e)).split())) from None
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -338,18 +555,19 @@ def _read_mapping(path: Path) -> dict:
 
 
 def params_from_dict(data: dict) -> ModelParams:
-    """Merge `data` over the defaults, build and validate."""
-    base = _read_mapping(default_params_path())
-    return validate(_build(ModelParams, _merge(base, data), ""))
+    """`data` (any subset of the keys) over the defaults, typed and validated;
+    errors (ParameterError) name the key."""
+    return _typed(data)
 
 
 def load_params(path: str | Path | None = None) -> ModelParams:
     """Default parameters, or those of the YAML/JSON file at `path` merged
-    over the defaults."""
+    over the defaults.  Errors name the file and the key."""
     if path is None:
-        return params_from_dict({})
+        return _defaults().copy()
+    data = read_params_mapping(Path(path))
     try:
-        return params_from_dict(_read_mapping(Path(path)))
+        return params_from_dict(data)
     except ParameterError as e:
         raise ParameterError(f"{path}: {e}") from None
 

@@ -3,11 +3,12 @@
 sweeps).
 
 On a terminal a bar is redrawn in place (at most twice a second); in a log
-(stderr not a terminal) a line is written only when something finished, so
-CI logs stay short.  The estimate of the time left counts only the work done
-by this call (`start` items already done, e.g. reused from an earlier run,
-take no time).  Nothing here catches Ctrl-C: long work is done in chunks
-between which a KeyboardInterrupt reaches the caller.
+(stderr not a terminal) a line is written when a step finishes or another
+tenth of the total is done, so CI logs stay short.  The estimate of the
+time left counts only the work done by this call (`start` items already
+done, e.g. reused from an earlier run, take no time).  Nothing here catches
+Ctrl-C: long work is done in chunks between which a KeyboardInterrupt
+reaches the caller.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class Progress:
         self.done = start
         self._last_draw = -1.0
         self._open = False  # a bar line is on screen without its newline
+        self._logged_tenth = -1  # last tenth of the total written to a log
 
     @property
     def stream(self):
@@ -81,7 +83,7 @@ class Progress:
 
     def update(self, done: float, note: str = "", force: bool = False) -> None:
         """Set the units done and redraw (throttled on a terminal; in a log
-        only when `force` or the task is complete)."""
+        at each tenth of the total, when `force`, or when complete)."""
         self.done = done
         if not self.enabled:
             return
@@ -95,13 +97,24 @@ class Progress:
             self._open = not complete
             if complete:
                 self.stream.write("\n")
-        elif force or complete:
+        else:
+            tenth = (int(10 * done / self.total) if self.total is not None and self.total > 0
+                     else -1)
+            if not (force or complete or tenth > self._logged_tenth):
+                return
+            self._logged_tenth = max(tenth, self._logged_tenth)
             self.stream.write(self.line(note) + "\n")
         self.stream.flush()
 
     def step(self, note: str = "", by: float = 1.0) -> None:
         """One more unit finished (always shown: a step is an event)."""
         self.update(self.done + by, note, force=True)
+
+    def skip(self, by: float = 1.0) -> None:
+        """Units found already done (reused from an earlier run): counted
+        as done, but not in the rate the time left is estimated from."""
+        self.start += by
+        self.done += by
 
     def say(self, text: str) -> None:
         """A message on its own line (the bar, if any, is kept above it)."""

@@ -22,7 +22,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,10 +29,12 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from .analysis.dataio import TimeSeriesData
+from .analysis.formats import TimeSeriesData
 from .diagram import SEAT_FORCE_NAMES, EhmDiagram, build_diagram
 from .model.anthropometry import REFERENCE, BodyMeasures
+from .model.extensions import equilibrium_effects
 from .params import PASSIVE_GROUPS, ModelParams
+from .progress import Progress
 from .signals import SeatSignal, make_seat_signal
 from .systems.outputs import CHANNEL_NAMES, SimulationDiverged
 from .systems.rotations import rpy_from_rotation
@@ -356,32 +357,6 @@ def _write_csv(path: Path, names, data) -> None:
 # ---------------------------------------------------------------------------
 
 
-class Progress:
-    """A one-line progress display on stderr (when `enabled`)."""
-
-    def __init__(self, label: str, total: float, enabled: bool = True):
-        self.label, self.total, self.enabled = label, total, enabled
-        self.t0 = time.perf_counter()
-        self._last = 0.0
-
-    def update(self, done: float, extra: str = "") -> None:
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if now - self._last < 0.5 and done < self.total:
-            return
-        self._last = now
-        frac = min(done / self.total, 1.0) if self.total > 0 else 1.0
-        wall = now - self.t0
-        eta = wall * (1 - frac) / frac if frac > 0 else float("nan")
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * frac:5.1f}% "
-                         f"eta {eta:5.0f} s {extra}   ")
-        if frac >= 1.0:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def _advance(simulator: Simulator, t_end: float, progress: Progress | None,
              chunk: float = 0.25) -> None:
     """Advance in chunks, updating the progress display between chunks (a
@@ -438,23 +413,19 @@ def posture_summary(model: EhmDiagram, root_context) -> dict:
     }
 
 
-def _without_delay(effects: dict | None) -> dict:
-    return {k: v for k, v in (effects or {}).items() if k != "reflex_delay"}
-
-
 def initial_state(model: EhmDiagram, x_plant_and_controllers: np.ndarray,
                   source: StateMap) -> np.ndarray:
     """The full state of `model` from a state of a diagram of the same plant
-    without the reflex delay (`source`): the delay buffer holds the plant
-    state throughout (the body has been at rest), other extra groups their
-    defaults."""
+    without the extensions left out of the static equilibrium (`source`):
+    their states as each extension's `initial_state` sets them for the body
+    at rest (e.g. a delay buffer holding the plant state throughout), other
+    extra groups their defaults."""
     vmap = StateMap(model)
     ctx = model.diagram.CreateDefaultContext()
     x = vmap.transfer(source, x_plant_and_controllers, vmap.get(ctx))
-    if "reflex_delay" in model.systems:
-        sl = vmap.slice("reflex_delay")
-        xp = x_plant_and_controllers[source.slice("plant")]
-        x[sl] = np.tile(xp, (sl.stop - sl.start) // len(xp))
+    xp = x_plant_and_controllers[source.slice("plant")]
+    for ext in model.extensions:
+        ext.initial_state(model, vmap, x, xp)
     return x
 
 
@@ -464,7 +435,7 @@ def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
     """Settle the body on the seat for `variant` (see module doc), with the
     candidate `effects` (see `ehm_drake.gap.effects`) if given."""
     eq_model = build_diagram(params, measures, None, "default", guard=False,
-                             effects=_without_delay(effects))
+                             effects=equilibrium_effects(effects))
     ctx, smap = static_equilibrium(eq_model)
     x_eq = smap.get(ctx)
     T = params.simulation.settle_time_s if settle_time is None else settle_time
@@ -497,10 +468,9 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
     """Play `signal` from the settled state; record at the output rate.
 
     The signal's settle time is skipped: the run starts from the settled
-    state at t = signal.settle_time.  With the `cocontraction` effect the
-    running RMS of the seat acceleration starts at the signal's RMS over
-    its steady part (the subject has adapted to the level when recording
-    starts).
+    state at t = signal.settle_time.  The model extensions set their own
+    states for the run (`ModelExtension.start_run`, e.g. a running RMS of
+    the seat acceleration starting at the signal's level).
     """
     variant = variant or settled.variant
     if settled.fingerprint != model_fingerprint(params, measures, variant, effects):
@@ -511,11 +481,8 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
     ctx = model.diagram.CreateDefaultContext()
     smap = StateMap(model)
     x = np.array(settled.state, float)
-    if "cocontraction" in model.systems:
-        steady = signal.acceleration[int(round((signal.settle_time + signal.onset_time)
-                                               / signal.time_step)):]
-        ms = float(np.mean(np.sum(steady**2, axis=1))) if len(steady) else 0.0
-        x[smap.slice("cocontraction")] = ms
+    for ext in model.extensions:
+        ext.start_run(model, smap, x, signal)
     smap.set(ctx, x)
     set_normal_reference(model, ctx)
     ctx.SetTime(signal.settle_time)

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from ehm_drake.analysis.dataio import read_frf, read_timeseries
+from ehm_drake.analysis.formats import read_frf, read_timeseries
 from ehm_drake.cli import main
 
 #: Module fixtures: the module's tests stay on one xdist worker (built once).

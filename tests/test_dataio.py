@@ -1,4 +1,4 @@
-"""Tests for ehm_drake.analysis.dataio (file formats, validation, unit checks)."""
+"""Tests for ehm_drake.analysis.formats (file formats, validation, unit checks)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ehm_drake.analysis.dataio import (
+from ehm_drake.analysis.formats import (
     DataFormatError,
     FrfData,
     TimeSeriesData,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ehm_drake.analysis.dataio import FrfData
+from ehm_drake.analysis.formats import FrfData
 from ehm_drake.cli import main
 from ehm_drake.identification.fit import FitError, Residuals, fit, safe_parameters
 from ehm_drake.identification.parameters import apply_scales, resolve_free, scale_bounds

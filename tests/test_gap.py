@@ -39,6 +39,8 @@ def test_bad_effect_parameters_are_refused_with_the_name():
         validate_effects({"reflex_delay": {"tau_s": -0.01}})
     with pytest.raises(ValueError, match="gamma"):
         validate_effects({"seat_foam_stiffening": {"gamma_per_mm2": float("nan")}})
+    with pytest.raises(ValueError, match=r"tau_s .*allowed >= 0 s\), got True"):
+        validate_effects({"reflex_delay": {"tau_s": True}})  # a flag is not a delay
 
 
 # ---------------------------------------------------------------------------

@@ -135,7 +135,7 @@ def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, t
     1 away from 10 Hz and 2 at it."""
     import shutil
 
-    from ehm_drake.analysis.dataio import read_frf
+    from ehm_drake.analysis.formats import read_frf
     from ehm_drake.cli import main
 
     out, _, _ = blind_run

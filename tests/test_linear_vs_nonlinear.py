@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ehm_drake.analysis.linear import linearize
-from ehm_drake.analysis.spectral import transmissibility
+from ehm_drake.analysis.transmissibility import transmissibility
 from ehm_drake.diagram import build_diagram
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import vibrate

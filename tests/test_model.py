@@ -164,3 +164,66 @@ def test_the_sdf_folder_resolves_outside_the_checkout(tmp_path):
     folder = Path(out)
     assert (folder / "package.xml").is_file(), out
     assert (folder / "ehm_human_50th_male.sdf").is_file()
+
+
+# ---------------------------------------------------------------------------
+# Model extensions: the core calls their hooks, it names none
+# ---------------------------------------------------------------------------
+
+
+def test_the_candidate_effects_are_the_registered_extensions():
+    from ehm_drake.gap.effects import EFFECT_NAMES, validate_effects
+    from ehm_drake.model.extensions import extension_names, validate_extensions
+
+    assert extension_names() == EFFECT_NAMES
+    eff = {"seat_friction": {"mu": 0.5}, "visceral_mass": {}}
+    assert validate_extensions(eff) == validate_effects(eff)
+
+
+def test_a_new_extension_reaches_the_diagram_without_core_changes(params, monkeypatch):
+    """A toy extension (a constant generalized force, the pads' restraints
+    gated) enters through the hooks alone."""
+    from pydrake.systems.framework import LeafSystem
+
+    from ehm_drake.diagram import build_diagram
+    from ehm_drake.model import extensions
+    from ehm_drake.systems.seat import restraint_block
+
+    class Push(LeafSystem):
+        def __init__(self, nq, nv, f):
+            super().__init__()
+            self.DeclareVectorInputPort("state", nq + nv)
+            self.DeclareVectorOutputPort("generalized_force", nv,
+                                         lambda ctx, out: out.SetFromVector(f))
+
+    class ConstantPush(extensions.ModelExtension):
+        name = "constant_push"
+
+        def add_force_systems(self, parts):
+            layout = parts.hp.layout
+            f = np.full(layout.nv, self.values["force"])
+            return [parts.add_system("push", Push(layout.nq, layout.nv, f))]
+
+        def restraint_options(self, params, points):
+            return {"gated_parts": ("lower_pad",)}
+
+    monkeypatch.setitem(extensions._REGISTRY, "constant_push", ConstantPush)
+
+    def evaluate(effects):
+        m = build_diagram(params, effects=effects)
+        ctx = m.diagram.CreateDefaultContext()
+        for port in ("seat_acceleration", "seat_displacement"):
+            m.diagram.GetInputPort(port).FixValue(ctx, np.zeros(3))
+        adder = m.diagram.GetSubsystemByName("generalized_force_sum")
+        force = adder.get_output_port().Eval(adder.GetMyContextFromRoot(ctx))
+        r = m.systems["shear_restraints"]
+        gated = restraint_block(r.GetMyContextFromRoot(ctx).get_numeric_parameter(
+            r.parameter_index).CopyToVector(), "contact_gated")
+        return m, force, gated
+
+    _, f0, g0 = evaluate({})
+    m, f1, g1 = evaluate({"constant_push": {"force": 0.5}})
+    assert "push" in m.systems and m.effects == {"constant_push": {"force": 0.5}}
+    np.testing.assert_allclose(f1 - f0, 0.5, atol=1e-9)
+    pads = [p.part == "lower_pad" for p in m.systems["shear_restraints"].points]
+    assert np.array_equal(g1, np.where(pads, 1.0, 0.0)) and not np.any(g0)

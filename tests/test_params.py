@@ -85,3 +85,120 @@ def test_variants(params):
     assert not hs.pid.integrator
     with pytest.raises(ParameterError, match="unknown variant"):
         apply_variant(params, "stiff")
+
+
+# ---------------------------------------------------------------------------
+# Bad files: one line naming the file, the key and (for a value) the allowed range
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name,text,expected", [
+    ("unknown.yaml", "pid:\n  spine:\n    kpp: [1, 2, 3]\n",
+     "unknown.yaml: unknown parameter key: pid.spine.kpp "
+     "(known here: kp, kd, integral_time_s, integral_torque_limit)"),
+    ("type.yaml", "contact:\n  pelvis_pan:\n    damping: soft\n",
+     "type.yaml: contact.pelvis_pan.damping: expected a number, got 'soft'"),
+    ("item.yaml", "pid:\n  spine:\n    kp: [1, 2, true]\n",
+     "item.yaml: pid.spine.kp[2]: expected a number, got True"),
+    ("bool.yaml", "pid:\n  integrator: 1\n",
+     "bool.yaml: pid.integrator: expected true/false, got 1"),
+    ("nan.yaml", "contact:\n  pelvis_pan:\n    stiffness: .nan\n",
+     "nan.yaml: contact.pelvis_pan.stiffness: must be finite, got nan (allowed > 0 N/m)"),
+    ("nan.json", '{"his": {"kd": [1, NaN, 1]}}',
+     "nan.json: his.kd[1]: must be finite, got nan (allowed >= 0 N m s/rad)"),
+    ("negative.yaml", "passive:\n  neck:\n    stiffness: [-1, 1, 1]\n",
+     "negative.yaml: passive.neck.stiffness[0] = -1.0: must not be negative "
+     "(allowed >= 0 N m/rad)"),
+    ("step.yaml", "simulation:\n  time_step_s: 10\n",
+     "step.yaml: simulation.time_step_s = 10.0: allowed 1e-05..0.01 s "
+     "(1 ms as in the paper; give seconds, not milliseconds)"),
+    ("rate.yaml", "simulation:\n  time_step_s: 0.002\n  output_rate_hz: 1000\n",
+     "rate.yaml: simulation.output_rate_hz = 1000.0: allowed 100..500 Hz "
+     "(at least 100 Hz, at most the simulation rate 1/simulation.time_step_s)"),
+    ("pair.yaml", "contact:\n  thighs_pan: {stiffness: 0}\n",
+     "pair.yaml: contact.thighs_pan.stiffness = 0.0: allowed > 0 N/m "
+     "(a contact pair without stiffness does not carry the body)"),
+    ("limit.yaml", "restraints:\n  feet_floor: {force_limit: 0}\n",
+     "limit.yaml: restraints.feet_floor.force_limit must be positive when "
+     "restraints.feet_floor.stiffness > 0, got 0.0 (allowed > 0 N: beyond this force the "
+     "restraint slips)"),
+    ("model.yaml", "contact:\n  model: magic\n",
+     "model.yaml: contact.model = 'magic': allowed 'point' or 'hydroelastic'"),
+    ("group.yaml", "his: 3\n", "group.yaml: his: expected a mapping, got 3"),
+    ("short.yaml", "his:\n  kp: [1, 2]\n",
+     "short.yaml: his.kp: expected a list of 3 numbers, got [1, 2]"),
+    ("syntax.yaml", "his: [1\n",
+     "syntax.yaml: not valid YAML: line 2, column 1: while parsing a flow sequence, "
+     "expected ',' or ']', but got '<stream end>'"),
+])
+def test_bad_file_errors_are_one_line_naming_file_key_and_range(tmp_path, name, text,
+                                                                expected):
+    f = tmp_path / name
+    f.write_text(text)
+    with pytest.raises(ParameterError) as e:
+        load_params(f)
+    assert str(e.value) == f"{tmp_path}/{expected}"
+    assert "\n" not in str(e.value) and str(e.value).count(name) == 1
+
+
+def test_conditional_ranges_only_apply_when_their_condition_holds():
+    p = params_from_dict({"pid": {"integrator": False, "spine": {"integral_time_s": 0}}})
+    assert p.pid.spine.integral_time_s == 0
+    assert params_from_dict({"restraints": {"pelvis_pan": {"stiffness": 0,
+                                                           "force_limit": 0}}})
+    with pytest.raises(ParameterError, match=r"pid\.neck\.integral_time_s must be positive when "
+                                             r"pid\.integrator is true, got 0\.0"):
+        params_from_dict({"pid": {"neck": {"integral_time_s": 0}}})
+
+
+def test_drake_loader_conventions(tmp_path, params):
+    """What yaml_load_typed adds over plain YAML: numbers written as YAML 1.2
+    or quoted are read as numbers (PyYAML leaves "8.0e4" a string), "true"
+    reads as a bool; one number stands for all three components of a vector."""
+    f = tmp_path / "p.yaml"
+    f.write_text("passive:\n  spine_axial_stiffness: 8.0e4\nhis:\n  enabled: 'true'\n"
+                 "  kd: 0.7\n  kp: ['1.5', 2, 3]\n")
+    p = load_params(f)
+    assert p.passive.spine_axial_stiffness == 80000.0 and p.his.enabled is True
+    assert p.his.kd == (0.7, 0.7, 0.7) and p.his.kp == (1.5, 2.0, 3.0)
+    assert all(type(x) is float for x in p.his.kd + p.his.kp)
+
+
+def test_complete_dicts_load_exactly(params):
+    """Sweep and fit pass complete parameter sets: the same values come back,
+    bit for bit, and the caller's dict is not changed."""
+    d = params.to_dict()
+    d["pid"]["spine"]["kp"] = [1, 2.5, 3]
+    d["passive"]["knees"]["stiffness"][0] = -0.0
+    before = json.dumps(d)
+    p = params_from_dict(d)
+    assert json.dumps(d) == before
+    assert json.dumps(p.to_dict()) == before.replace("[1, 2.5, 3]", "[1.0, 2.5, 3.0]")
+    assert load_params() == params and load_params() is not load_params()
+
+
+def test_every_number_has_a_range_row_with_a_unit(params):
+    """The RANGES table covers every numeric key (none falls to the catch-all)."""
+    from ehm_drake.params import RANGES, _walk_values, range_of
+
+    bases = {base for _, base, v in _walk_values(params) if isinstance(v, float)}
+    for base in bases:
+        r = range_of(base)
+        assert r is not RANGES[-1], base
+        assert r.unit or base == "variants.high_stiffness_factor", base
+
+
+def test_fit_bounds_lie_within_the_admissible_ranges(params):
+    """The fit's physiological bounds (data/fit_parameters.yaml) are a
+    narrower, sourced prior; each must be admissible and in the same unit."""
+    from ehm_drake.identification.parameters import load_registry
+    from ehm_drake.params import range_of
+
+    registry, _ = load_registry()
+    for fp in registry.values():
+        lo, hi = fp.bounds
+        for path in fp.paths:
+            r = range_of(path)
+            assert r.unit == fp.unit, (fp.name, path)
+            top = r.hi(params) if callable(r.hi) else r.hi
+            assert r.lo <= lo < hi <= top and (lo > 0 or not r.lo_open), (fp.name, path)

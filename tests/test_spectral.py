@@ -1,4 +1,5 @@
-"""Tests for ehm_drake.analysis.spectral (H1 / MIMO estimators, transmissibility)."""
+"""Tests for ehm_drake.analysis.spectral, .welch and .transmissibility (H1 / MIMO estimators,
+band filter, transmissibility)."""
 
 from __future__ import annotations
 
@@ -6,16 +7,15 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from ehm_drake.analysis.dataio import TimeSeriesData
+from ehm_drake.analysis.formats import TimeSeriesData
 from ehm_drake.analysis.spectral import (
     apparent_mass,
-    band_filter,
-    default_nperseg,
     frf_uncertainty,
     mimo_h1,
     tfestimate,
-    transmissibility,
 )
+from ehm_drake.analysis.transmissibility import transmissibility
+from ehm_drake.analysis.welch import band_filter, default_nperseg
 
 #: Module fixtures: the module's tests stay on one xdist worker (built once).
 pytestmark = pytest.mark.xdist_group("spectral")

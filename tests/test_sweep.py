@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pytest
 
-from ehm_drake.analysis.dataio import read_frf
+from ehm_drake.analysis.formats import read_frf
 from ehm_drake.sweep import (
     BODY_PRESETS,
     SweepSpecError,

@@ -9,7 +9,7 @@ import pytest
 from pydrake.systems.analysis import Simulator
 
 from ehm_drake.analysis.apparent_mass import apparent_mass_table
-from ehm_drake.analysis.spectral import transmissibility
+from ehm_drake.analysis.transmissibility import transmissibility
 from ehm_drake.diagram import build_diagram
 from ehm_drake.params import params_from_dict
 from ehm_drake.signals import make_seat_signal

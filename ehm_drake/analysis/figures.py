@@ -14,7 +14,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np  # noqa: E402
 
-from .dataio import FrfData  # noqa: E402
+from .formats import FrfData  # noqa: E402
 
 #: DoFs shown per loading case (Desai et al. Sec. III-A).
 CASE_DOFS = {"x": ("x", "pitch"), "y": ("y", "roll", "yaw"), "z": ("z", "pitch")}

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..diagram import EhmDiagram
 from ..systems.outputs import CHANNEL_NAMES, DOFS, SEGMENTS
-from .dataio import FrfData
+from .formats import FrfData
 
 INPUT_NAMES = ("seat_ax", "seat_ay", "seat_az")
 OUTPUT_PORTS = ("channels", "seat_forces", "joint_torques", "his_torque")

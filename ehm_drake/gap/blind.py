@@ -37,6 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..progress import Progress
 from .effects import EFFECT_NAMES, EFFECTS
 from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 
@@ -256,7 +257,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             raise BlindError(f"{out} holds a blind run with other settings; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
     trials = plan(spec)
-    results, ran, busy = [], 0, 0.0
+    results = []
+    prog = Progress("blind", len(trials), progress, unit="trials")
     for k, tr in enumerate(trials):
         tdir = out / f"trial_{tr['trial']:03d}"
         rfile = tdir / "result.json"
@@ -269,6 +271,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                        json.loads((diag / "report.json").read_text()), spec)
                 rfile.write_text(json.dumps(res, indent=1) + "\n")
             results.append(res)
+            prog.skip()
             continue
         t1 = time.perf_counter()
         if not (data / "frf.csv").is_file():
@@ -295,17 +298,11 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         _judge(res, data, key_data, report, spec)
         rfile.write_text(json.dumps(res, indent=1) + "\n")
         results.append(res)
-        ran, busy = ran + 1, busy + time.perf_counter() - t1  # ETA: trials run by this call
-        if progress:
-            s = res["score"]
-            ok = s["top1"] or (not s["has_effect"] and not s["false_alarm"])
-            left = len(trials) - k - 1
-            sys.stderr.write(
-                f"blind: trial {k + 1}/{len(trials)}: hidden {s['truth_label']} -> "
-                f"{s['verdict']} {s['predicted_label']} "
-                f"({'ok' if ok else 'MISS'}"
-                f"{'' if s['detectable'] or not s['has_effect'] else ', not detectable'}"
-                f"); eta {busy / ran * left:.0f} s\n")
+        s = res["score"]
+        ok = s["top1"] or (not s["has_effect"] and not s["false_alarm"])
+        prog.step(f"trial {k + 1}: hidden {s['truth_label']} -> {s['verdict']} "
+                  f"{s['predicted_label']} ({'ok' if ok else 'MISS'}"
+                  f"{'' if s['detectable'] or not s['has_effect'] else ', not detectable'})")
     summary = summarize(results)
     summary["settings"] = settings
     (out / "blind.json").write_text(json.dumps({"summary": summary, "trials": results},

@@ -39,7 +39,6 @@ import json
 import math
 import os
 import pickle
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,11 +46,18 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-from ..analysis.dataio import FrfData, read_frf, read_timeseries
+from ..analysis.formats import (
+    DataFormatError,
+    FrfData,
+    find_test_timeseries,
+    read_frf,
+    read_timeseries,
+)
 from ..identification.parameters import resolve_free
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..parallel import run_jobs, worker_count
 from ..params import ModelParams, load_params
+from ..progress import Progress
 from .effects import EFFECT_NAMES, EFFECTS
 from .family import build_families, linearize_cut, static_penetrations
 from .localize import (
@@ -102,25 +108,17 @@ class LabData:
 
 
 def _find_timeseries(root: Path, direction: str, level: float) -> Path | None:
-    tj = root / "tests.json"
-    if tj.is_file():
-        try:
-            for t in json.loads(tj.read_text()).get("tests", []):
-                if t.get("direction") == direction and \
-                        math.isclose(float(t.get("level_rms", -1)), level, rel_tol=1e-6):
-                    p = root / t["timeseries"]
-                    return p if p.is_file() else None
-        except (ValueError, KeyError, TypeError) as e:
-            raise DiagnosisError(f"{tj}: unreadable test list ({e})") from None
-    p = root / f"{direction}_{level:g}" / "timeseries.csv"
-    return p if p.is_file() else None
+    try:
+        return find_test_timeseries(root, direction, level)
+    except DataFormatError as e:
+        raise DiagnosisError(str(e)) from None
 
 
 def load_lab_data(path, channels: str = "plane") -> LabData:
     """Measured data: a folder with frf.csv (every test, with level_rms),
     optionally tests.json and per-test time series (<d>_<level>/
     timeseries.csv); or a folder with one timeseries.csv; or an frf.csv."""
-    from ..analysis.spectral import transmissibility
+    from ..analysis.transmissibility import transmissibility
 
     path = Path(path)
     notes = []
@@ -392,12 +390,6 @@ class Diagnosis:
     cells_after: list
 
 
-def _emit(progress, msg: str) -> None:
-    if progress:
-        sys.stderr.write(msg + "\n")
-        sys.stderr.flush()
-
-
 def _heldout_gap(chi: np.ndarray, keys: np.ndarray) -> float:
     return gap_value(chi, keys)
 
@@ -518,16 +510,17 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
     lab = data if isinstance(data, LabData) else load_lab_data(data, channels)
     rows = lab.rows
     base_names = [f.name for f in resolve_free("default")]
-    _emit(progress, f"diagnose: {len(rows)} rows, {len(lab.tests)} tests "
-                    f"({', '.join(f'{t.direction}@{t.level:g}' for t in lab.tests)}); "
-                    f"{len(names)} candidates")
+    Progress("diagnose", enabled=progress).say(
+        f"{len(rows)} rows, {len(lab.tests)} tests "
+        f"({', '.join(f'{t.direction}@{t.level:g}' for t in lab.tests)}); "
+        f"{len(names)} candidates")
     t0 = time.perf_counter()
+    fam_prog = Progress("diagnose: linearizing the candidate models", None, progress,
+                        unit="models")
 
     def fam_progress(done, total):
-        if progress and (done == total or done % 10 == 0):
-            wall = time.perf_counter() - t0
-            _emit(progress, f"diagnose: linearizing the candidate models {done}/{total} "
-                            f"(eta {wall / done * (total - done):.0f} s)")
+        fam_prog.total = total
+        fam_prog.update(done, force=done % 10 == 0)
 
     fams = load_families(params, measures, names, base_names, workers, fam_progress,
                          use_cache)
@@ -543,10 +536,10 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
     t1 = time.perf_counter()
     nwork = min(worker_count(workers), len(order))
 
+    fit_prog = Progress("diagnose: candidates", len(order), progress, unit="fitted")
+
     def on_result(done, total, i, r):
-        wall = time.perf_counter() - t1
-        _emit(progress, f"diagnose: candidate {r['name']} fitted ({done}/{total}, "
-                        f"{r['wall_s']:.0f} s; eta {wall / done * (total - done):.0f} s)")
+        fit_prog.step(f"({r['name']}, {r['wall_s']:.0f} s)")
 
     for r in run_jobs([(_evaluate_candidate, n) for n in order], nwork, on_result,
                       _init_worker, (state,)):

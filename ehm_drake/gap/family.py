@@ -39,11 +39,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis.linear import FD_STEP, INPUT_FD_STEP, _linearize_fd
-from ..diagram import COCONTRACTION_GROUPS, build_diagram
+from ..diagram import build_diagram
 from ..model.anthropometry import REFERENCE, BodyMeasures
+from ..model.extensions import equilibrium_effects
 from ..parallel import run_jobs
 from ..params import ModelParams, params_from_dict
 from ..systems.seat import restraint_block
+from .effects import COCONTRACTION_GROUPS
 
 GAP_OUTPUTS = ("channels", "restraint_normal_displacement", "restraint_deflection")
 #: Restraint point groups (by contact pair) of the equivalent directions.
@@ -59,7 +61,10 @@ SENSITIVITY_STEP = 0.1
 
 
 def _without_delay(effects: dict) -> dict:
-    return {k: v for k, v in (effects or {}).items() if k != "reflex_delay"}
+    """`effects` without the feedback delay (it is applied in the frequency
+    domain, see `response`) or any other extension left out of the static
+    equilibrium."""
+    return equilibrium_effects(effects)
 
 
 @dataclass

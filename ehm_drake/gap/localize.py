@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from ..analysis.dataio import FrfData
+from ..analysis.formats import FrfData
 from ..systems.outputs import CHANNEL_NAMES
 
 BANDS = ((0.1, 1.0), (1.0, 2.5), (2.5, 5.0), (5.0, 8.0), (8.0, 12.0))

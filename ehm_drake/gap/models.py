@@ -49,8 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..diagram import BACK_PADS, SEAT_SURFACES
-from .effects import EFFECTS, EffectParam
+from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, EffectParam
 from .family import (
     GROUP_NAMES,
     FamilySpec,

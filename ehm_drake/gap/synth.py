@@ -31,19 +31,19 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..analysis.dataio import FrfData, TimeSeriesData
-from ..analysis.spectral import transmissibility
+from ..analysis.formats import FrfData, TimeSeriesData, write_test_list
+from ..analysis.transmissibility import transmissibility
 from ..identification.parameters import apply_scales, representative, resolve_free
 from ..model.anthropometry import REFERENCE
 from ..parallel import run_jobs
 from ..params import ModelParams, params_from_dict
+from ..progress import Progress
 from .effects import EFFECTS, effect_values
 
 DEFAULT_LEVELS = (0.3, 0.6)
@@ -183,22 +183,20 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
     base = params if params is not None else load_params()
     subject, factors = subject_parameters(base, spec.seed, spec.spread)
     effects = spec.effect_values()
-    if progress:
-        desc = ", ".join(f"{n} ({s:.2f})" for n, s in spec.effects.items() if s > 0) or "none"
-        sys.stderr.write(f"synth: subject seed {spec.seed}, effects: {desc}; settling\n")
+    desc = ", ".join(f"{n} ({s:.2f})" for n, s in spec.effects.items() if s > 0) or "none"
+    Progress("synth", enabled=progress).say(
+        f"subject seed {spec.seed}, effects: {desc}; settling")
     settled = settle(subject, REFERENCE, effects=effects)
     tests = [(d, lv) for d in spec.directions for lv in spec.levels]
     seeds = _test_seeds(spec.seed, len(tests))
     jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
             for (d, lv), sd in zip(tests, seeds, strict=True)]
+    prog = Progress("synth", len(tests), progress, unit="tests")
 
     def report(done, total, i, result):
-        if progress:
-            wall = time.perf_counter() - t0
-            d, lv = tests[i]
-            sys.stderr.write(f"synth: test {d} @ {level_label(lv)} m/s^2 done ({done}/{total}, "
-                             f"real-time factor {result[3]:.2f}), eta "
-                             f"{wall / done * (total - done):.0f} s\n")
+        d, lv = tests[i]
+        prog.step(f"test {d} @ {level_label(lv)} m/s^2 done (real-time factor "
+                  f"{result[3]:.2f})")
 
     results = run_jobs([(_run_test, j) for j in jobs], workers, report)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -213,15 +211,11 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
                           "timeseries": f"{sub.name}/timeseries.csv",
                           "duration_s": float(r[1].duration),
                           "n_averages": int(r[0].n_averages[0])})
-    (out_dir / "tests.json").write_text(json.dumps({
-        "directions": spec.directions,
-        "levels_rms": list(spec.levels),
-        "tests": test_list,
-        "processing": {"estimator": "H1", "segment_s": SEGMENT_S, "overlap": 0.5,
-                       "window": "hann", "band_hz": [0.1, 12.0],
-                       "excitation": "random, flat 0.1-12 Hz"},
-        "channel_units": {"translation": "m/m", "rotation": "deg/m"},
-    }, indent=2) + "\n")
+    write_test_list(out_dir, spec.directions, spec.levels, test_list,
+                    {"estimator": "H1", "segment_s": SEGMENT_S, "overlap": 0.5,
+                     "window": "hann", "band_hz": [0.1, 12.0],
+                     "excitation": "random, flat 0.1-12 Hz"},
+                    {"translation": "m/m", "rotation": "deg/m"})
     key = {
         "seed": spec.seed,
         "effects": {n: {"strength": float(s), "values": effect_values(n, s)}
@@ -237,9 +231,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
     key_path.parent.mkdir(parents=True, exist_ok=True)
     key_path.write_text(json.dumps(key, indent=2, default=float) + "\n")
     wall = time.perf_counter() - t0
-    if progress:
-        sys.stderr.write(f"synth: wrote {out_dir} ({len(frf)} FRF rows) and key {key_path} "
-                         f"in {wall:.0f} s\n")
+    prog.say(f"wrote {out_dir} ({len(frf)} FRF rows) and key {key_path} in {wall:.0f} s")
     return SynthResult(out_dir, key_path, frf, key, wall, test_list)
 
 

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,10 +46,11 @@ import numpy as np
 import yaml
 from scipy.optimize import least_squares
 
-from ..analysis.dataio import FrfData
+from ..analysis.formats import FrfData
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..parallel import process_pool
 from ..params import ModelParams, ParameterError, params_from_dict, save_params
+from ..progress import Progress
 from ..systems.outputs import CHANNEL_NAMES
 from .parameters import (
     FreeParameter,
@@ -338,7 +338,7 @@ def split_holdout(frf: FrfData, holdout: str | None) -> tuple[FrfData, FrfData |
 
 def check_fit_data(frf: FrfData) -> list[str]:
     """Errors for data that cannot be fitted, warnings for what looks odd."""
-    from ..analysis.dataio import check_units
+    from ..analysis.formats import check_units
 
     warnings = []
     segs = set(frf.segment)
@@ -357,8 +357,7 @@ class _Tracker:
         self.best_cost = math.inf
         self.best_x = None
         self.n = 0
-        self.t0 = time.perf_counter()
-        self.progress = progress
+        self.progress = Progress("fit", None, progress, unit="evaluations")
         self.cost0 = cost0
 
     def record(self, x, r) -> None:
@@ -366,11 +365,10 @@ class _Tracker:
         cost = 0.5 * float(r @ r)
         if cost < self.best_cost:
             self.best_cost, self.best_x = cost, np.array(x)
-        if self.progress:
-            start = f" (start {self.cost0:.4g})" if self.cost0 is not None else ""
-            sys.stderr.write(f"\rfit: evaluation {self.n}, cost {cost:.4g}, best "
-                             f"{self.best_cost:.4g}{start}, {time.perf_counter() - self.t0:.0f} s ")
-            sys.stderr.flush()
+        start = f" (start {self.cost0:.4g})" if self.cost0 is not None else ""
+        # In a log, every 10th evaluation (a fit makes hundreds).
+        self.progress.update(self.n, f"cost {cost:.4g}, best {self.best_cost:.4g}{start}",
+                             force=self.n % 10 == 0)
 
 
 def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None = None,
@@ -462,8 +460,7 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         if pool is not None:
             pool.shutdown(cancel_futures=True)
     t_fit = time.perf_counter() - t_start
-    if progress:
-        sys.stderr.write("\n")
+    tracker.progress.close()
     if J is None:
         J = np.full((res.size, len(x0)), np.nan)
     # Final model at its own equilibrium.
@@ -555,7 +552,7 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
     with the data.  The excitation is the recorded seat acceleration when
     `timeseries` is given, else random 0.1-12 Hz per measured direction at
     the measured level.  Fails on divergence, lost posture or instability."""
-    from ..analysis.spectral import transmissibility
+    from ..analysis.transmissibility import transmissibility
     from ..signals import make_seat_signal, signal_from_samples
     from ..simulation import EquilibriumError, SimulationDiverged, settle, vibrate
 

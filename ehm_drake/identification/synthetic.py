@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..analysis.dataio import FrfData
+from ..analysis.formats import FrfData
 from ..analysis.linear import default_frequencies, frf_from_array, linearize
 from ..diagram import build_diagram
 from ..model.anthropometry import REFERENCE, BodyMeasures

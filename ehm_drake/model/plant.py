@@ -21,6 +21,11 @@ pair's stiffness and damping are exactly the parameter values: point
 contact with SAP's linear Kelvin-Voigt law f = k (x + tau xdot), tau = d/k.
 No friction: shear is carried by the point restraints of
 `ehm_drake.systems.seat.ShearRestraints`.
+
+Extensions (the gap diagnosis' candidate effects) change the body, the
+seat and the force elements through the hooks of
+`ehm_drake.model.extensions.ModelExtension`; this module calls them and
+names none.
 """
 
 from __future__ import annotations
@@ -53,6 +58,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from ..params import CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
 from .anthropometry import REFERENCE, Body, BodyMeasures, build_body
+from .extensions import ModelExtension, merge_options, resolve_extensions, validate_extensions
 from .sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
 
 PACKAGE_NAME = "ehm_drake"
@@ -154,21 +160,26 @@ class HumanPlant:
     contact_model: str
     time_step: float
     effects: dict = field(default_factory=dict)
+    #: The resolved extensions of `effects`, in registration order.
+    extensions: tuple[ModelExtension, ...] = ()
 
     @property
     def num_dofs(self) -> int:
         return self.plant.num_velocities()
 
 
-def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures, effects: dict):
+def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
+                 extensions: tuple[ModelExtension, ...]):
+    """The packaged SDF for the reference body without extensions, else
+    SDF generated from `body` (and the extensions' seat options)."""
     parser = configure_parser(Parser(plant))
-    if measures == REFERENCE and not effects:
+    if measures == REFERENCE and not extensions:
         (human,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{HUMAN_SDF_NAME}")
         (seat,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{SEAT_SDF_NAME}")
     else:
-        cushion = effects.get("seat_cushion_dynamics", {}).get("mass_kg", 0.0)
+        seat_options = merge_options(extensions, "seat_options")
         (human,) = parser.AddModelsFromString(human_sdf(body), "sdf")
-        (seat,) = parser.AddModelsFromString(seat_sdf(body, cushion), "sdf")
+        (seat,) = parser.AddModelsFromString(seat_sdf(body, **seat_options), "sdf")
     return human, seat
 
 
@@ -180,22 +191,19 @@ def add_seated_human(
 ) -> HumanPlant:
     """Add the plant (+ SceneGraph) of the seated human to `builder`.
 
-    `effects` ({name: {parameter: value}}, see `ehm_drake.gap.effects`)
-    extends the model with the gap diagnosis' candidate effects that change
-    the multibody system: separate arms, visceral mass, seat cushion,
-    backrest pads further back (the others act through the diagram's
-    systems, see `ehm_drake.diagram.build_diagram`).
+    `effects` ({name: {parameter: value}}: registered model extensions,
+    the gap diagnosis' candidate effects, see `ehm_drake.gap.effects`)
+    extends the model: each extension's plant hooks (`body_options`,
+    `modify_body`, `seat_options`, `add_plant_elements`, see
+    `ehm_drake.model.extensions`) change the body, the seat and the force
+    elements; the others act through the diagram's systems (see
+    `ehm_drake.diagram.build_diagram`).
     """
-    from ..gap.effects import validate_effects
-
-    effects = validate_effects(effects)
-    viscera = effects.get("visceral_mass", {}).get("mass_kg", 0.0)
-    body = build_body(measures, separate_arms="arms" in effects, viscera_kg=viscera)
-    if "backrest_separation" in effects:
-        offset = effects["backrest_separation"]["offset_mm"] * 1e-3
-        for pad in ("lower_pad", "upper_pad"):
-            c, size = body.seat.boxes[pad]
-            body.seat.boxes[pad] = (c - np.array([offset, 0.0, 0.0]), size)
+    effects = validate_extensions(effects)
+    extensions = resolve_extensions(effects)
+    body = build_body(measures, **merge_options(extensions, "body_options"))
+    for ext in extensions:
+        ext.modify_body(body)
     config = MultibodyPlantConfig(
         time_step=params.simulation.time_step_s,
         discrete_contact_approximation="sap",
@@ -206,13 +214,14 @@ def add_seated_human(
     )
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
-    human, seat = _load_models(plant, body, measures, effects)
+    human, seat = _load_models(plant, body, measures, extensions)
     pelvis = plant.GetBodyByName("pelvis", human)
     free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
     free.set_default_translation(body.segments["pelvis"].origin_W)
     _set_default_joint_damping(plant, human, params)
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
-    _add_effect_elements(plant, human, seat, body, effects)
+    for ext in extensions:
+        ext.add_plant_elements(plant, human, seat, body)
     plant.Finalize()
     return HumanPlant(
         plant=plant,
@@ -226,6 +235,7 @@ def add_seated_human(
         contact_model=params.contact.model,
         time_step=params.simulation.time_step_s,
         effects=effects,
+        extensions=extensions,
     )
 
 
@@ -262,9 +272,8 @@ def _joint_layout(plant: MultibodyPlant, human) -> JointLayout:
 
 def _per_dof(layout: JointLayout, group_of, attr: str) -> np.ndarray:
     """Value of `attr` ([x, y, z] per group) for each rotational DoF."""
-    return np.array(
-        [getattr(group_of(g), attr)[axis] for g, axis in zip(layout.groups, layout.axes, strict=True)]
-    )
+    return np.array([getattr(group_of(g), attr)[axis]
+                     for g, axis in zip(layout.groups, layout.axes, strict=True)])
 
 
 def passive_stiffness_vector(params: ModelParams, layout: JointLayout) -> np.ndarray:
@@ -428,79 +437,3 @@ def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body)
                     CollisionFilterDeclaration().ExcludeBetween(GeometrySet(gid), GeometrySet(sid))
                 )
     return body_geoms, seat_geoms
-
-
-# ---------------------------------------------------------------------------
-# Gap-diagnosis effects that add force elements
-# ---------------------------------------------------------------------------
-
-
-def _add_effect_elements(plant, human, seat, body: Body, effects: dict) -> None:
-    """Springs and dampers of the effect extensions (see gap.effects)."""
-    from pydrake.math import RigidTransform
-    from pydrake.multibody.tree import FixedOffsetFrame, LinearBushingRollPitchYaw
-
-    zero = np.zeros(3)
-    if "arms" in effects:
-        from pydrake.math import RollPitchYaw
-
-        k_sh = effects["arms"]["shoulder_stiffness"]
-        k_h = effects["arms"]["hand_stiffness"]
-        for side in ("l", "r"):
-            joint = plant.GetJointByName(f"shoulder_{side}", human)
-            arm = body.segments[f"arm_{side}"]
-            p_hand = body.landmarks[f"hand_{side}"]
-            thigh = body.segments[f"thigh_{side}"]
-            # Statics of the placed arm (the reference pose is its rest
-            # position for every stiffness): the thigh carries the hand
-            # vertically with the force balancing the arm's weight moment in
-            # pitch about the shoulder; the shoulder the remaining moment.
-            # Both springs are preloaded accordingly (their rest positions
-            # are offset), so only their stiffness changes the dynamics.
-            r_c, r_h = arm.com_W - arm.origin_W, p_hand - arm.origin_W
-            weight = np.array([0.0, 0.0, -9.81 * arm.mass])
-            F_hand = np.array([0.0, 0.0, arm.mass * 9.81 * r_c[0] / r_h[0]])
-            T_shoulder = -(np.cross(r_c, weight) + np.cross(r_h, F_hand))
-            # Damping ratio 0.2 on the arm's pitch inertia about the shoulder.
-            I_sh = arm.inertia_W[1, 1] + arm.mass * float(np.sum(r_c[[0, 2]] ** 2))
-            rest = plant.AddFrame(FixedOffsetFrame(
-                f"shoulder_spring_rest_{side}", joint.frame_on_parent(),
-                RigidTransform(RollPitchYaw(T_shoulder / k_sh), np.zeros(3))))
-            plant.AddForceElement(LinearBushingRollPitchYaw(
-                rest, joint.frame_on_child(), np.full(3, k_sh),
-                np.full(3, 0.4 * np.sqrt(k_sh * I_sh)), zero, zero))
-            # The hand on the thigh: a 3D spring-damper (damping ratio 0.3
-            # on the arm mass).
-            fa = plant.AddFrame(FixedOffsetFrame(
-                f"hand_on_thigh_{side}", plant.GetBodyByName(f"thigh_{side}", human).body_frame(),
-                RigidTransform(p_hand - thigh.origin_W + F_hand / k_h)))
-            fc = plant.AddFrame(FixedOffsetFrame(
-                f"hand_{side}", plant.GetBodyByName(f"arm_{side}", human).body_frame(),
-                RigidTransform(p_hand - arm.origin_W)))
-            c_h = 0.6 * np.sqrt(k_h * arm.mass)
-            plant.AddForceElement(LinearBushingRollPitchYaw(
-                fa, fc, zero, zero, np.full(3, k_h), np.full(3, c_h)))
-    if effects.get("visceral_mass", {}).get("mass_kg", 0.0) > 0:
-        v = effects["visceral_mass"]
-        m, w = v["mass_kg"], 2 * np.pi * v["freq_hz"]
-        joint = plant.GetJointByName("visceral_z", human)
-        joint.set_default_damping_vector([2 * v["damping_ratio"] * m * w])
-        plant.AddForceElement(LinearBushingRollPitchYaw(
-            joint.frame_on_parent(), joint.frame_on_child(), zero, zero,
-            np.array([0.0, 0.0, m * w * w]), zero))
-    if effects.get("seat_cushion_dynamics", {}).get("mass_kg", 0.0) > 0:
-        c = effects["seat_cushion_dynamics"]
-        k = c["stiffness"]
-        # The cushion carries its own mass and the occupant's pan share.
-        m_eff = c["mass_kg"] + NOMINAL_LOAD_SHARE["pelvis_pan"] * body.total_mass \
-            + 2 * NOMINAL_LOAD_SHARE["thighs_pan"] * body.total_mass
-        joint = plant.GetJointByName("cushion_z", seat)
-        joint.set_default_damping_vector([2 * c["damping_ratio"] * np.sqrt(k * m_eff)])
-        # Preloaded so that under the nominal occupant the cushion surface
-        # sits where the rigid pan's does (the model's seat geometry is the
-        # loaded seat): the spring's free position is m_eff g / k higher.
-        lift = m_eff * 9.81 / k
-        rest = plant.AddFrame(FixedOffsetFrame(
-            "cushion_spring_rest", joint.frame_on_parent(), RigidTransform([0.0, 0.0, lift])))
-        plant.AddForceElement(LinearBushingRollPitchYaw(
-            rest, joint.frame_on_child(), zero, zero, np.array([0.0, 0.0, k]), zero))

@@ -131,14 +131,16 @@ def human_sdf(body: Body) -> str:
             lines += [
                 f'    <collision name="{e.name}">',
                 f"      <pose>{_pose(e.center_W - o)}</pose>",
-                f"      <geometry><ellipsoid><radii>{_vec(e.semi_axes)}</radii></ellipsoid></geometry>",
+                f"      <geometry><ellipsoid><radii>{_vec(e.semi_axes)}</radii>"
+                "</ellipsoid></geometry>",
                 "    </collision>",
             ]
         for i, (kind, c, dims, rpy) in enumerate(_visual_shapes(name, body)):
             if kind == "ellipsoid":
                 geo = f"<ellipsoid><radii>{_vec(dims)}</radii></ellipsoid>"
             else:
-                geo = f"<capsule><radius>{_f(dims[0])}</radius><length>{_f(dims[1])}</length></capsule>"
+                geo = (f"<capsule><radius>{_f(dims[0])}</radius>"
+                       f"<length>{_f(dims[1])}</length></capsule>")
             lines += [
                 f'    <visual name="{name}_visual_{i}">',
                 f"      <pose>{_pose(np.asarray(c) - o, rpy)}</pose>",
@@ -216,7 +218,8 @@ def human_sdf(body: Body) -> str:
     ]
     lines += [f"    <drake:member>{n}</drake:member>" for n in body.segments]
     lines += [
-        "    <drake:ignored_collision_filter_group>body_self</drake:ignored_collision_filter_group>",
+        "    <drake:ignored_collision_filter_group>body_self"
+        "</drake:ignored_collision_filter_group>",
         "  </drake:collision_filter_group>",
         "</model>",
         "</sdf>",

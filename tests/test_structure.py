@@ -1,0 +1,171 @@
+"""The package's structure: one room per idea, no import cycles, no module
+over 700 lines, and the shared progress helper's behaviour."""
+
+from __future__ import annotations
+
+import ast
+import io
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from ehm_drake.progress import Progress
+
+PACKAGE = Path(__file__).resolve().parents[1] / "ehm_drake"
+MAX_LINES = 700
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in sorted(PACKAGE.rglob("*.py")):
+        parts = p.relative_to(PACKAGE.parent).with_suffix("").parts
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+def _resolve(module: str, node: ast.ImportFrom, is_package: bool) -> str:
+    if node.level == 0:
+        return node.module or ""
+    base = module.split(".")
+    base = base if is_package else base[:-1]
+    base = base[:len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> package modules it imports at import time (top-level
+    statements only: imports inside functions run later and cannot close
+    a cycle at import)."""
+    mods = _modules()
+    graph = {}
+    for name, path in mods.items():
+        deps = set()
+        is_pkg = path.name == "__init__.py"
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                src = _resolve(name, node, is_pkg)
+                targets = [src] + [f"{src}.{a.name}" for a in node.names]
+            else:
+                continue
+            deps |= {t for t in targets if t in mods and t != name}
+        graph[name] = deps
+    return graph
+
+
+def test_no_module_is_longer_than_700_lines():
+    long = {n: len(p.read_text().splitlines()) for n, p in _modules().items()}
+    assert {n: k for n, k in long.items() if k > MAX_LINES} == {}
+
+
+def test_the_import_graph_has_no_cycle():
+    graph = _import_graph()
+    state: dict[str, int] = {}  # 1 on the stack, 2 done
+
+    def visit(n, stack):
+        state[n] = 1
+        for d in sorted(graph[n]):
+            # A package's __init__ importing its own submodules is not a
+            # cycle; a submodule importing its package's __init__ is.
+            if state.get(d) == 1 and not n.startswith(d + "."):
+                cycle = stack[stack.index(d):] + [d]
+                pytest.fail("import cycle: " + " -> ".join(cycle))
+            if d not in state:
+                visit(d, stack + [d])
+        state[n] = 2
+
+    for n in sorted(graph):
+        if n not in state:
+            visit(n, [n])
+    # The checker sees the imports it must see.
+    assert "ehm_drake.cli_common" in graph["ehm_drake.cli"]
+
+
+def test_command_modules_share_helpers_from_below():
+    graph = _import_graph()
+    assert "ehm_drake.cli" not in graph["ehm_drake.gap.commands"]
+    assert graph["ehm_drake.cli_common"] == set()
+
+
+@pytest.mark.slow
+def test_every_module_imports_alone():
+    """Each module imported first in a fresh interpreter (the order-dependent
+    failures a cycle causes show up only this way)."""
+
+    def run(name):
+        r = subprocess.run([sys.executable, "-c", f"import {name}"], capture_output=True,
+                           text=True)
+        return name, r.returncode, r.stderr.strip().splitlines()[-1:] if r.stderr else []
+
+    with ThreadPoolExecutor(2) as pool:
+        bad = [(n, err) for n, rc, err in pool.map(run, _modules()) if rc != 0]
+    assert bad == []
+
+
+# ---------------------------------------------------------------------------
+# Progress
+# ---------------------------------------------------------------------------
+
+
+class _Log(io.StringIO):
+    def isatty(self):
+        return False
+
+
+class _Tty(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_in_a_log_writes_a_line_per_tenth_and_per_step():
+    log = _Log()
+    p = Progress("job", 100, stream=log)
+    for i in range(1, 101):
+        p.update(i)
+    lines = log.getvalue().splitlines()
+    assert len(lines) == 11  # the start (1 %), then 10 %, 20 %, ..., 100 %
+    assert "  1.0%" in lines[0] and " 10.0%" in lines[1]
+    assert lines[-1].startswith("job: [") and "100.0%" in lines[-1]
+    log = _Log()
+    p = Progress("runs", 3, stream=log, unit="runs")
+    p.step("first")
+    assert log.getvalue().splitlines()[-1].startswith("runs: [")
+    assert "1/3 runs" in log.getvalue() and "first" in log.getvalue()
+
+
+def test_progress_eta_counts_only_this_calls_work():
+    p = Progress("blind", 10, enabled=False)
+    for _ in range(6):
+        p.skip()  # reused from an earlier run: no time
+    assert p.eta() is None  # nothing ran yet: no rate
+    p.t0 -= 10.0  # 10 s for the one trial run now
+    p.step()
+    assert p.done == 7
+    assert p.eta() == pytest.approx(30.0, rel=0.01)  # 3 left at 10 s each
+
+
+def test_progress_on_a_terminal_redraws_in_place_and_keeps_messages_apart():
+    tty = _Tty()
+    p = Progress("simulate", 2.0, stream=tty)
+    p.update(1.0)
+    assert tty.getvalue().startswith("\rsimulate: [") and not tty.getvalue().endswith("\n")
+    p.say("settled")
+    assert tty.getvalue().endswith("\nsimulate: settled\n")
+    p.update(2.0)
+    assert tty.getvalue().endswith("\n")
+
+
+def test_quiet_progress_writes_nothing():
+    log = _Log()
+    p = Progress("x", 5, enabled=False, stream=log)
+    p.update(5)
+    p.step()
+    p.say("hello")
+    p.close()
+    assert log.getvalue() == ""
