@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..progress import Progress
+from ..realities import MODEL_REALITY
 from .effects import EFFECT_NAMES, EFFECTS
 from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 
@@ -70,6 +71,9 @@ class BlindSpec:
     strength: tuple = DETECTABLE_STRENGTH
     workers: int | None = None
     extra: dict = field(default_factory=dict)
+    #: The body that makes each trial's data ("ehm": the model itself; or an
+    #: independent reality, `ehm_drake.realities`).
+    reality: str = MODEL_REALITY
 
     def validate(self) -> None:
         if self.trials < 1:
@@ -82,7 +86,11 @@ class BlindSpec:
         lo, hi = self.strength
         if not (0 < lo <= hi <= 1):
             raise BlindError(f"strength range must satisfy 0 < lo <= hi <= 1, got {self.strength}")
-        SynthSpec({}, 0, tuple(self.levels), self.directions, self.duration_s).validate()
+        try:
+            SynthSpec({}, 0, tuple(self.levels), self.directions, self.duration_s,
+                      reality=self.reality).validate()
+        except ValueError as e:
+            raise BlindError(str(e)) from None
 
 
 def plan(spec: BlindSpec) -> list[dict]:
@@ -160,6 +168,35 @@ def detectability(data, key: dict, params=None, measures=None, workers: int | No
         out[name] = {"cells": int(sum(m > 0 for m in margins)),
                      "max_margin": float(max(margins)) if margins else 0.0}
     return {"detectable": any(v["cells"] > 0 for v in out.values()), "effects": out}
+
+
+def twin_detectability(data, twin) -> dict:
+    """Whether a trial on an independent reality shows its hidden effect:
+    the same subject, excitation and sensor noise without the effect (the
+    twin data, made from the key) against the trial's data, cell by cell
+    with the data's own uncertainty and the model floor (`localize`).  A
+    cell whose chi^2 exceeds the significance threshold minus its degrees of
+    freedom would, in expectation, be significant: the effect changes the
+    measurement there beyond the noise.  (The model's base refit, which the
+    own-family check uses, cannot be run on a reality; so an effect that
+    only mimics subject scatter counts as detectable here: a stricter test.)
+    Returns {"detectable", "effects": {"all": {"cells", "max_margin"}}}."""
+    from scipy.stats import chi2 as chi2_dist
+
+    from .diagnose import load_lab_data
+    from .localize import SIGNIFICANCE, chi2_rows, localize
+
+    rows = load_lab_data(data).rows
+    ref = load_lab_data(twin).rows
+    if len(ref.H) != len(rows.H) or not np.array_equal(ref.freq, rows.freq):
+        raise BlindError(f"twin data {twin} do not match {data} row for row")
+    cells = localize(rows, chi2_rows(rows, ref.H))
+    n = len(cells)
+    margins = [c["chi2"] - (chi2_dist.isf(SIGNIFICANCE / n, c["dof_chi2"]) - c["dof_chi2"])
+               for c in cells]
+    det = {"cells": int(sum(m > 0 for m in margins)),
+           "max_margin": float(max(margins)) if margins else 0.0}
+    return {"detectable": det["cells"] > 0, "effects": {"all": det}}
 
 
 def score(truth: dict, report: dict, detectable: bool | None = None) -> dict:
@@ -251,7 +288,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     settings = json.loads(json.dumps(settings))
     sfile = out / "blind_settings.json"
     if sfile.is_file():
-        old = json.loads(sfile.read_text())
+        old = {"reality": MODEL_REALITY, **json.loads(sfile.read_text())}
         if {k: v for k, v in old.items() if k != "trials"} != \
                 {k: v for k, v in settings.items() if k != "trials"}:
             raise BlindError(f"{out} holds a blind run with other settings; use another --out")
@@ -264,11 +301,12 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         rfile = tdir / "result.json"
         data, key, diag = tdir / "data", out / "keys" / f"trial_{tr['trial']:03d}.json", \
             tdir / "diagnosis"
+        twin = (tdir / "twin_data", out / "keys" / f"trial_{tr['trial']:03d}_twin.json")
         if rfile.is_file():
             res = json.loads(rfile.read_text())
             if "detectability" not in res:  # scored before the detectability check
                 _judge(res, data, json.loads(key.read_text()),
-                       json.loads((diag / "report.json").read_text()), spec)
+                       json.loads((diag / "report.json").read_text()), spec, twin)
                 rfile.write_text(json.dumps(res, indent=1) + "\n")
             results.append(res)
             prog.skip()
@@ -280,8 +318,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                 shutil.rmtree(data, ignore_errors=True)
                 key.unlink(missing_ok=True)
             synthesize(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
-                                 spec.directions, spec.duration_s), data, key,
-                       workers=spec.workers, progress=False)
+                                 spec.directions, spec.duration_s, reality=spec.reality),
+                       data, key, workers=spec.workers, progress=False)
         t_synth = time.perf_counter() - t1
         rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log")
         if rc != 0:
@@ -295,7 +333,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                "fitted": {e["effect"]: e["params"] for e in report["ranking"]
                           if e["effect"] in tr["effects"]},
                "synth_s": t_synth, "diagnose_s": report.get("timing_s", {}).get("total")}
-        _judge(res, data, key_data, report, spec)
+        _judge(res, data, key_data, report, spec, twin)
         rfile.write_text(json.dumps(res, indent=1) + "\n")
         results.append(res)
         s = res["score"]
@@ -311,9 +349,25 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     return summary
 
 
-def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec) -> None:
-    """Add the trial's detectability (from its key) and its score."""
-    det = detectability(data, key, workers=spec.workers)
+def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
+           twin: tuple[Path, Path]) -> None:
+    """Add the trial's detectability (from its key) and its score.  On an
+    independent reality the twin data (the trial without its effects) are
+    made here, after the diagnosis, into `twin` (folder, key file)."""
+    if spec.reality == MODEL_REALITY:
+        det = detectability(data, key, workers=spec.workers)
+    elif not key["effects"]:
+        det = {"detectable": False, "effects": {}}
+    else:
+        folder, twin_key = twin
+        if not (folder / "frf.csv").is_file():
+            import shutil
+            shutil.rmtree(folder, ignore_errors=True)
+            twin_key.unlink(missing_ok=True)
+            synthesize(SynthSpec({}, key["seed"], tuple(key["levels_rms"]), key["directions"],
+                                 key["duration_s"], reality=spec.reality),
+                       folder, twin_key, workers=spec.workers, progress=False)
+        det = twin_detectability(data, folder)
     res["detectability"] = det
     res["score"] = score(res["hidden"], report, det["detectable"])
 

@@ -8,6 +8,7 @@ import argparse
 import sys
 
 from ..cli_common import csv_floats, int_at_least, prepare_output_dir
+from ..realities import MODEL_REALITY
 from .effects import EFFECT_NAMES
 
 
@@ -53,6 +54,9 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S",
                    help="record length per test, s (default 60)")
     p.add_argument("--workers", type=int_at_least(1), default=None)
+    p.add_argument("--reality", default=MODEL_REALITY, metavar="NAME",
+                   help="the body that makes the data: ehm (the model itself, default) or an "
+                   "independent reality (see ehm_drake.realities)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--key", required=True, metavar="KEYFILE")
     p.add_argument("--quiet", action="store_true")
@@ -73,6 +77,9 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--duration", type=float, default=None, metavar="S")
     p.add_argument("--p-none", type=float, default=0.15, help="fraction of no-effect trials")
     p.add_argument("--p-two", type=float, default=0.10, help="fraction of two-effect trials")
+    p.add_argument("--reality", default=MODEL_REALITY, metavar="NAME",
+                   help="the body that makes each trial's data: ehm (the model itself, "
+                   "default) or an independent reality (see ehm_drake.realities)")
     p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
@@ -116,7 +123,7 @@ def cmd_synth(args) -> int:
 
     spec = SynthSpec(parse_effects_arg(args.effect, args.strength), args.seed,
                      args.levels or DEFAULT_LEVELS, _directions(args.directions),
-                     args.duration or DEFAULT_DURATION_S)
+                     args.duration or DEFAULT_DURATION_S, reality=args.reality)
     res = synthesize(spec, args.out, args.key, workers=args.workers, progress=not args.quiet)
     print(f"synth: {len(res.tests)} tests, {len(res.frf)} FRF rows -> {res.out_dir}; "
           f"key -> {res.key_path}")
@@ -130,7 +137,7 @@ def cmd_blind(args) -> int:
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
-                     workers=args.workers)
+                     workers=args.workers, reality=args.reality)
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):
         return "n/a" if x is None else f"{100 * x:.0f}%"

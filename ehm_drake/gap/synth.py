@@ -19,6 +19,12 @@ a seeded factor uniform in [1 - spread, 1 + spread] (spread 0.15: inter-
 subject variability of seated-body resonance frequencies and peak gains is
 10-20%).
 
+The body.  By default the model itself (``reality="ehm"``); or an independent
+reality (`ehm_drake.realities`: a seated-human simulation that is not the
+EHM model, with its own subject scatter and its own implementation of the
+candidate effects), whose records pass through the same measurement chain,
+sampled at the lab's motion-capture rate (`LAB_RATE_HZ`).
+
 The measurement chain.  Random seat excitation (flat 0.1-12 Hz, seeded) per
 direction and level; body motion by motion capture: white noise of 0.1 mm
 (translations) and 0.05 deg (rotations) RMS on every sample (optical
@@ -44,6 +50,7 @@ from ..model.anthropometry import REFERENCE
 from ..parallel import run_jobs
 from ..params import ModelParams, params_from_dict
 from ..progress import Progress
+from ..realities import CHANNEL_NAMES, MODEL_REALITY, RealityError, get_reality
 from .effects import EFFECTS, effect_values
 
 DEFAULT_LEVELS = (0.3, 0.6)
@@ -54,6 +61,12 @@ SUBJECT_SPREAD = 0.15
 NOISE_TRANSLATION_M = 1.0e-4
 NOISE_ROTATION_DEG = 0.05
 NOISE_SEAT_MS2 = 0.005
+#: Motion-capture sampling rate of the lab (Hz): an independent reality's
+#: records are taken at this rate (the EHM model logs at its own output
+#: rate, 200 Hz by default).
+LAB_RATE_HZ = 200.0
+#: Half-cosine fade-in of an independent reality's excitation, s.
+REALITY_ONSET_S = 1.0
 
 
 class SynthError(ValueError):
@@ -70,8 +83,16 @@ class SynthSpec:
     directions: str = "xyz"
     duration_s: float = DEFAULT_DURATION_S
     spread: float = SUBJECT_SPREAD
+    #: The body that makes the data: "ehm" (the model) or an independent
+    #: reality's name (`ehm_drake.realities`).
+    reality: str = MODEL_REALITY
 
     def validate(self) -> None:
+        if self.reality != MODEL_REALITY:
+            try:
+                get_reality(self.reality)
+            except RealityError as e:
+                raise SynthError(str(e)) from None
         for name, s in self.effects.items():
             if name not in EFFECTS:
                 raise SynthError(f"unknown effect {name!r}; choose from "
@@ -131,7 +152,14 @@ def _run_test(args):
                               s.time_step_s, s.settle_time_s, s.onset_time_s)
     result = vibrate(params, settled, signal, REFERENCE, effects=effects)
     steady = result.after(signal.steady_start)
-    ts = steady.to_timeseries()
+    frf, ts = _measure(steady.to_timeseries(), direction, level, seed)
+    return frf, ts, time.perf_counter() - t0, result.meta.get("real_time_factor", float("nan"))
+
+
+def _measure(ts: TimeSeriesData, direction: str, level: float, seed: int):
+    """The lab's measurement chain on a noise-free record: sensor noise
+    (seeded by the test's seed), the test's nominal metadata, H1.  Returns
+    (FrfData, TimeSeriesData)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 3]))
     channels = {}
     for name, x in ts.channels.items():
@@ -144,7 +172,32 @@ def _run_test(args):
                         {"direction": direction, "level_rms": float(level)})
     nperseg = int(round(SEGMENT_S * ts.fs))
     frf = transmissibility(ts, directions=direction, nperseg=nperseg)
-    return frf, ts, time.perf_counter() - t0, result.meta.get("real_time_factor", float("nan"))
+    return frf, ts
+
+
+def _run_reality_test(args):
+    """One lab test on an independent reality: its record of the steady
+    part, sampled at the lab rate, through `_measure`.  Same return as
+    `_run_test`."""
+    from ..signals import make_seat_signal
+
+    name, prepared, direction, level, duration, seed = args
+    reality = get_reality(name)
+    t0 = time.perf_counter()
+    signal = make_seat_signal("random", direction, level, duration + REALITY_ONSET_S, seed,
+                              reality.time_step, 0.0, REALITY_ONSET_S)
+    rec = reality.run_test(prepared, signal)
+    rec.check(f"reality {name}, test {direction} @ {level_label(level)} m/s^2")
+    step = (rec.t[-1] - rec.t[0]) / (len(rec.t) - 1)
+    k = int(round(1.0 / (LAB_RATE_HZ * step)))
+    if k < 1 or abs(k * step * LAB_RATE_HZ - 1.0) > 1e-6:
+        raise SynthError(f"reality {name} records at {1 / step:g} Hz, not a multiple of the "
+                         f"lab's {LAB_RATE_HZ:g} Hz")
+    ts = TimeSeriesData(rec.t[::k] - rec.t[0], rec.seat_acc[::k],
+                        {c: np.asarray(rec.channels[c])[::k] for c in CHANNEL_NAMES},
+                        {"direction": direction, "level_rms": float(level)})
+    frf, ts = _measure(ts, direction, level, seed)
+    return frf, ts, time.perf_counter() - t0, rec.real_time_factor
 
 
 @dataclass
@@ -180,17 +233,41 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
     out_dir, key_path = Path(out_dir), Path(key_path)
     _check_outputs(out_dir, key_path)
     t0 = time.perf_counter()
-    base = params if params is not None else load_params()
-    subject, factors = subject_parameters(base, spec.seed, spec.spread)
-    effects = spec.effect_values()
     desc = ", ".join(f"{n} ({s:.2f})" for n, s in spec.effects.items() if s > 0) or "none"
     Progress("synth", enabled=progress).say(
+        f"{'' if spec.reality == MODEL_REALITY else f'reality {spec.reality}, '}"
         f"subject seed {spec.seed}, effects: {desc}; settling")
-    settled = settle(subject, REFERENCE, effects=effects)
     tests = [(d, lv) for d in spec.directions for lv in spec.levels]
     seeds = _test_seeds(spec.seed, len(tests))
-    jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
-            for (d, lv), sd in zip(tests, seeds, strict=True)]
+    if spec.reality == MODEL_REALITY:
+        base = params if params is not None else load_params()
+        subject, factors = subject_parameters(base, spec.seed, spec.spread)
+        effects = spec.effect_values()
+        settled = settle(subject, REFERENCE, effects=effects)
+        run = _run_test
+        jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
+                for (d, lv), sd in zip(tests, seeds, strict=True)]
+        truth = {
+            "effects": {n: {"strength": float(s), "values": effect_values(n, s)}
+                        for n, s in spec.effects.items() if s > 0},
+            "subject_factors": factors,
+            "subject_values": {n: representative(subject, f) for n, f in
+                               ((f.name, f) for f in resolve_free("default"))},
+        }
+    else:
+        reality = get_reality(spec.reality)
+        subject = reality.subject(spec.seed)
+        values = {n: reality.effect_values(n, s) for n, s in spec.effects.items() if s > 0}
+        settled = reality.prepare(subject, values)
+        run = _run_reality_test
+        jobs = [(spec.reality, settled, d, lv, spec.duration_s, sd)
+                for (d, lv), sd in zip(tests, seeds, strict=True)]
+        truth = {
+            "reality": spec.reality,
+            "effects": {n: {"strength": float(s), "values": values[n]}
+                        for n, s in spec.effects.items() if s > 0},
+            "subject": subject,
+        }
     prog = Progress("synth", len(tests), progress, unit="tests")
 
     def report(done, total, i, result):
@@ -198,7 +275,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
         prog.step(f"test {d} @ {level_label(lv)} m/s^2 done (real-time factor "
                   f"{result[3]:.2f})")
 
-    results = run_jobs([(_run_test, j) for j in jobs], workers, report)
+    results = run_jobs([(run, j) for j in jobs], workers, report)
     out_dir.mkdir(parents=True, exist_ok=True)
     frf = FrfData.concat([r[0] for r in results])
     frf.to_csv(out_dir / "frf.csv")
@@ -218,16 +295,13 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
                     {"translation": "m/m", "rotation": "deg/m"})
     key = {
         "seed": spec.seed,
-        "effects": {n: {"strength": float(s), "values": effect_values(n, s)}
-                    for n, s in spec.effects.items() if s > 0},
-        "subject_factors": factors,
-        "subject_values": {n: representative(subject, f) for n, f in
-                           ((f.name, f) for f in resolve_free("default"))},
+        **truth,
         "levels_rms": list(spec.levels),
         "directions": spec.directions,
         "duration_s": spec.duration_s,
-        "settle_summary": settled.summary,
     }
+    if spec.reality == MODEL_REALITY:
+        key["settle_summary"] = settled.summary
     key_path.parent.mkdir(parents=True, exist_ok=True)
     key_path.write_text(json.dumps(key, indent=2, default=float) + "\n")
     wall = time.perf_counter() - t0
