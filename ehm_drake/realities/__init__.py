@@ -125,7 +125,7 @@ class Reality:
 
 _REGISTRY: dict[str, type[Reality]] = {}
 #: Modules that register the shipped realities (imported on first lookup).
-_MODULES: tuple[str, ...] = ()
+_MODULES: tuple[str, ...] = ("ehm_drake.realities.lumped", "ehm_drake.realities.spine5")
 
 
 def register_reality(cls: type[Reality]) -> type[Reality]:
