@@ -20,8 +20,8 @@ from ehm_drake.realities import (
     RealityError,
     RealityRecord,
     get_reality,
-    register_reality,
     reality_names,
+    register_reality,
 )
 
 

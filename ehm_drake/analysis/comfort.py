@@ -46,6 +46,7 @@ import numpy as np
 from scipy import fft as sp_fft
 
 from .iso2631_tables import WEIGHTING_PARAMETERS
+from .welch import as_signal, check_fs
 
 __all__ = [
     "WEIGHTINGS",
@@ -91,29 +92,11 @@ def _canonical(name: str) -> str:
     return key
 
 
-def _check_fs(fs: float) -> float:
-    if isinstance(fs, bool) or not isinstance(fs, int | float | np.integer | np.floating):
-        raise TypeError(f"fs must be a number (Hz), got {type(fs).__name__}")
-    fs = float(fs)
-    if not (math.isfinite(fs) and fs > 0):
-        raise ValueError(f"fs must be a finite positive sample rate (Hz), got {fs}")
-    return fs
-
-
 def _as_signal(x: Any, name: str = "x") -> np.ndarray:
-    if np.iscomplexobj(x):
-        raise TypeError(f"{name} must be real, got complex values")
-    try:
-        arr = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name} must be a real numeric array") from None
-    if arr.ndim not in (1, 2):
-        raise ValueError(f"{name} must be 1-D or 2-D (time along axis 0), got shape {arr.shape}")
+    """`x` checked by the spectral estimators' rule, with at least 2 samples."""
+    arr = as_signal(x, name)
     if arr.shape[0] < 2:
         raise ValueError(f"{name} needs at least 2 samples, got {arr.shape[0]}")
-    bad = np.argwhere(~np.isfinite(arr))
-    if bad.size:
-        raise ValueError(f"{name} has a non-finite value at index {tuple(int(i) for i in bad[0])}")
     return arr
 
 
@@ -197,7 +180,7 @@ def apply_weighting(
     interest (the weightings extend to ~100 Hz; Wf to ~1 Hz).
     """
     key = _canonical(name)
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     arr = _as_signal(x)
     if remove_mean:
         arr = arr - arr.mean(axis=0)
@@ -240,7 +223,7 @@ def weighted_rms(x: Any, fs: float, weighting: str | None, pad: bool = True) -> 
     float or numpy.ndarray
         Scalar for 1-D input, shape (k,) for 2-D input.
     """
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     aw = _weighted(x, fs, weighting, pad)
     r = np.sqrt(np.mean(aw**2, axis=0))
     return float(r) if np.ndim(r) == 0 else r
@@ -252,7 +235,7 @@ def vdv(x: Any, fs: float, weighting: str | None, pad: bool = True) -> Any:
     For a sinusoid of amplitude ``A`` and duration ``T`` (integer number of periods):
     ``VDV = (3 T / 8)^(1/4) A |W(f)|``.
     """
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     aw = _weighted(x, fs, weighting, pad)
     r = (np.sum(aw**4, axis=0) / fs) ** 0.25
     return float(r) if np.ndim(r) == 0 else r
@@ -279,7 +262,7 @@ def mtvv(x: Any, fs: float, weighting: str | None, tau: float = 1.0, pad: bool =
     Maximum over time of the running RMS with linear (rectangular) integration over the
     last ``tau`` seconds (default 1 s), computed for every full window in the record.
     """
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     aw = _weighted(x, fs, weighting, pad)
     r = np.max(_running_rms(aw, fs, tau), axis=0)
     return float(r) if np.ndim(r) == 0 else r
@@ -293,7 +276,7 @@ def crest_factor(x: Any, fs: float, weighting: str | None, pad: bool = True) -> 
     ValueError
         If the weighted signal is identically zero (crest factor undefined).
     """
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     aw = _weighted(x, fs, weighting, pad)
     rms = np.sqrt(np.mean(aw**2, axis=0))
     if np.any(rms == 0):
@@ -308,7 +291,7 @@ def msdv_z(az: Any, fs: float, pad: bool = True) -> float:
     Vertical acceleration weighted with Wf (ISO 2631-1 Annex D).  For a sinusoid of
     amplitude ``A`` lasting ``T``: ``MSDV = A |Wf(f)| sqrt(T / 2)``.
     """
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     arr = _as_signal(az, "az")
     if arr.ndim != 1:
         raise ValueError(f"az must be 1-D (vertical acceleration), got shape {arr.shape}")
@@ -371,7 +354,7 @@ def comfort_metrics(
     """
     if location not in LOCATIONS:
         raise ValueError(f"unknown location '{location}'; expected one of {list(LOCATIONS)}")
-    fs = _check_fs(fs)
+    fs = check_fs(fs)
     acc = _as_signal(acc_xyz, "acc_xyz")
     if acc.ndim != 2 or acc.shape[1] != 3:
         raise ValueError(f"acc_xyz must have shape (N, 3), got {acc.shape}")
