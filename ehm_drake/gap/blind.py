@@ -312,14 +312,9 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             prog.skip()
             continue
         t1 = time.perf_counter()
-        if not (data / "frf.csv").is_file():
-            if data.exists() or key.exists():  # a half-written trial: redo it
-                import shutil
-                shutil.rmtree(data, ignore_errors=True)
-                key.unlink(missing_ok=True)
-            synthesize(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
-                                 spec.directions, spec.duration_s, reality=spec.reality),
-                       data, key, workers=spec.workers, progress=False)
+        _synthesize_once(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
+                                   spec.directions, spec.duration_s, reality=spec.reality),
+                         data, key, spec.workers)
         t_synth = time.perf_counter() - t1
         rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log")
         if rc != 0:
@@ -349,6 +344,18 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     return summary
 
 
+def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None) -> None:
+    """`synthesize` into `data` and `key` unless a finished data folder is
+    there (a half-written one, from an interrupted run, is redone)."""
+    if (data / "frf.csv").is_file():
+        return
+    if data.exists() or key.exists():
+        import shutil
+        shutil.rmtree(data, ignore_errors=True)
+        key.unlink(missing_ok=True)
+    synthesize(synth, data, key, workers=workers, progress=False)
+
+
 def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
            twin: tuple[Path, Path]) -> None:
     """Add the trial's detectability (from its key) and its score.  On an
@@ -360,13 +367,9 @@ def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
         det = {"detectable": False, "effects": {}}
     else:
         folder, twin_key = twin
-        if not (folder / "frf.csv").is_file():
-            import shutil
-            shutil.rmtree(folder, ignore_errors=True)
-            twin_key.unlink(missing_ok=True)
-            synthesize(SynthSpec({}, key["seed"], tuple(key["levels_rms"]), key["directions"],
-                                 key["duration_s"], reality=spec.reality),
-                       folder, twin_key, workers=spec.workers, progress=False)
+        _synthesize_once(SynthSpec({}, key["seed"], tuple(key["levels_rms"]), key["directions"],
+                                   key["duration_s"], reality=spec.reality),
+                         folder, twin_key, spec.workers)
         det = twin_detectability(data, folder)
     res["detectability"] = det
     res["score"] = score(res["hidden"], report, det["detectable"])
