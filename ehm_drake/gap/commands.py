@@ -35,6 +35,9 @@ def add_gap_arguments(sub) -> None:
                    help=f"candidate effects (default all: {', '.join(EFFECT_NAMES)})")
     p.add_argument("--workers", type=int_at_least(1), default=None,
                    help="parallel processes (default: all cores)")
+    p.add_argument("--no-discrepancy", action="store_true",
+                   help="leave out the model-form discrepancy (an unexplained gap stays "
+                   "unexplained instead of being tested as a structural one)")
     p.add_argument("--no-cache", action="store_true", help="recompute the linear families "
                    "instead of reusing $EHM_DRAKE_CACHE (default ~/.cache/ehm_drake)")
     p.add_argument("--force", action="store_true")
@@ -97,7 +100,8 @@ def cmd_diagnose(args) -> int:
     params = load_params(args.params)
     out = prepare_output_dir(args.out, args.force)
     diag = diagnose(args.data, params, args.effects, workers=args.workers,
-                    progress=not args.quiet, use_cache=not args.no_cache)
+                    progress=not args.quiet, use_cache=not args.no_cache,
+                    discrepancy=not args.no_discrepancy)
     files = write_report(diag, out, {"params_file": args.params})
     r = diag.report
     print(f"verdict: {r['verdict']}" + (f" ({r['best_effect']})" if r["best_effect"] else ""))

@@ -24,7 +24,14 @@ Procedure (`diagnose`):
    separated by the level-dependence evidence), with the experiment that
    would separate them (the test and channel where their predictions differ
    most); `unexplained` when no candidate removes half of it.
-5. Evidence from the data alone: level dependence (the same direction's
+5. The model-form gap (`discrepancy`): when no candidate explains it, a
+   smooth discrepancy per direction and channel, shared by the levels, with
+   its scale estimated from the data, is fitted; if it removes at least half
+   of the held-out gap, the candidates are scored again beyond it.  Verdict
+   `structural` (the model's form dominates the gap; where it lies) unless
+   one effect removes at least 15% of what remains beyond the discrepancy,
+   then `explained` with the effect's own share of the gap.
+6. Evidence from the data alone: level dependence (the same direction's
    FRF at two levels differing beyond their uncertainty) and coherence
    that does not rise with level (linear + sensor noise would give
    SNR-scaled coherence), both pointing at nonlinear candidates.
@@ -499,7 +506,7 @@ def separating_experiment(best: dict, other: dict, state: dict) -> dict:
 def diagnose(data, params: ModelParams | None = None, effects=None,
              measures: BodyMeasures = REFERENCE, workers: int | None = None,
              progress: bool = True, channels: str = "plane",
-             use_cache: bool = True) -> Diagnosis:
+             use_cache: bool = True, discrepancy: bool = True) -> Diagnosis:
     """Run the diagnosis on the data in `data` (see module doc)."""
     t_start = time.perf_counter()
     params = params if params is not None else load_params()
@@ -548,6 +555,12 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
     state["recentered"] = {n: r["recentered"] for n, r in results.items() if r["recentered"]}
     report, cells_before, cells_after = _assemble(lab, rows, results, base_names, names,
                                                   state, fold_kind, folds)
+    if discrepancy and report["verdict"] == "unexplained":
+        from .discrepancy import apply_to_report, structural_pass
+
+        sp = structural_pass(state, results, names, workers, progress)
+        apply_to_report(report, sp, rows)
+        t_fit = time.perf_counter() - t1
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
                           "total": time.perf_counter() - t_start, "workers": nwork}
     return Diagnosis(report, rows, results, base_names, cells_before, cells_after)

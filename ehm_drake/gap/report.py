@@ -90,6 +90,26 @@ def markdown(rep: dict, figures: list[str]) -> str:
                      f"{_pct(e['gap_reduction_train'])} | {_pct(e['gap_reduction_heldout'])} "
                      f"| {par} |")
     lines.append("")
+    sp = rep.get("structural")
+    if sp:
+        lines += ["## Model-form gap (smooth discrepancy per direction and channel, shared by "
+                  "the levels)", "",
+                  f"Scale estimated from the data: {_pct(sp['scale'])}. Held-out gap: base "
+                  f"refit {sp['gap_heldout_base']:.3g}, with the discrepancy "
+                  f"{sp['gap_heldout_discrepancy']:.3g} ({_pct(sp['discrepancy_share'])} "
+                  "removed)" + ("" if sp["ran"] else "; too little for the model-form gap "
+                                "to dominate, candidates not re-scored") + ".", ""]
+        if sp["ranking"]:
+            lines += ["| effect (beyond the discrepancy) | delta BIC | held-out gap | "
+                      "removed of what remains | own share of the gap |", "|---|---|---|---|---|"]
+            lines += [f"| {e['effect']} | {e['delta_bic']:.1f} | {e['gap_heldout']:.3g} | "
+                      f"{_pct(e['reduction_beyond'])} | {_pct(e['effect_share'])} |"
+                      for e in sp["ranking"]]
+            lines.append("")
+        lines += ["| direction | segment | DoF | band | RMS discrepancy |", "|---|---|---|---|---|"]
+        lines += [f"| {c['direction']} | {c['segment']} | {c['dof']} | {c['f_lo_hz']:g}-"
+                  f"{c['f_hi_hz']:g} Hz | {_pct(c['delta_rms'])} |" for c in sp["cells"][:10]]
+        lines.append("")
     if rep.get("separating_experiment"):
         lines += ["## Experiment that would separate the tied candidates", "",
                   rep["separating_experiment"].get("text", ""), ""]
