@@ -13,7 +13,6 @@ from ehm_drake.gap.discrepancy import (
     apply_to_report,
     basis,
     estimate_scale,
-    row_sigma,
 )
 from ehm_drake.gap.localize import Rows, band_index, chi2_rows, localize, relative_variance
 from ehm_drake.systems.outputs import CHANNEL_NAMES
@@ -57,9 +56,8 @@ def _significant(rows, H):
 
 def _absorbed(rows, Hm, scale):
     disc = Discrepancy.for_rows(rows, scale)
-    every = np.ones(len(rows), bool)
-    C = disc.solve(Hm, rows.H, row_sigma(rows, Hm), every)
-    return disc, C, disc.apply(Hm, C)
+    H, C = disc.absorb(Hm, rows, np.ones(len(rows), bool))
+    return disc, C, H
 
 
 def test_basis_is_a_partition_of_unity_over_the_band():

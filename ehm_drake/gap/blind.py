@@ -196,7 +196,7 @@ def twin_detectability(data, twin) -> dict:
     ref = load_lab_data(twin).rows
     if len(ref.H) != len(rows.H) or not np.array_equal(ref.freq, rows.freq):
         raise BlindError(f"twin data {twin} do not match {data} row for row")
-    from .discrepancy import SCALE_BOUNDS, Discrepancy, row_sigma
+    from .discrepancy import SCALE_BOUNDS, Discrepancy
 
     def margins(H):
         cells = localize(rows, chi2_rows(rows, H))
@@ -204,9 +204,8 @@ def twin_detectability(data, twin) -> dict:
         return [c["chi2"] - (chi2_dist.isf(SIGNIFICANCE / n, c["dof_chi2"]) - c["dof_chi2"])
                 for c in cells]
 
-    disc = Discrepancy.for_rows(rows, SCALE_BOUNDS[1])
-    every = np.ones(len(rows), bool)
-    absorbed = disc.apply(ref.H, disc.solve(ref.H, rows.H, row_sigma(rows, ref.H), every))
+    absorbed, _ = Discrepancy.for_rows(rows, SCALE_BOUNDS[1]).absorb(
+        ref.H, rows, np.ones(len(rows), bool))
     raw, beyond = margins(ref.H), margins(absorbed)
     det = {"cells": int(sum(m > 0 for m in beyond)),
            "max_margin": float(max(beyond)) if beyond else 0.0,

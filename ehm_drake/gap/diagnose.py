@@ -72,8 +72,10 @@ from .localize import (
     Rows,
     cell_keys,
     chi2_rows,
+    delta_bic,
     gap_value,
     localize,
+    mark_after,
     rows_from_frf,
 )
 from .models import (
@@ -408,15 +410,14 @@ def _ranking_entry(name, res, base, n_base, n_rows, base_names, keys) -> dict:
     g_held0 = _heldout_gap(base["chi_heldout"], keys)
     g_held = _heldout_gap(res["chi_heldout"], keys)
     k = len(cand.params)
-    delta_bic = float(np.nansum(res["chi_heldout"]) - np.nansum(base["chi_heldout"])
-                      + k * math.log(max(2 * n_rows, 2)))
+    dbic = delta_bic(res["chi_heldout"], base["chi_heldout"], k, n_rows)
     values = cand.values(theta[n_base:])
     return {
         "effect": name,
         "params": {e: {p: float(v) for p, v in vals.items()} for e, vals in values.items()},
         "gap_reduction_train": float(1 - g_train / g_train0) if g_train0 > 0 else 0.0,
         "gap_reduction_heldout": float(1 - g_held / g_held0) if g_held0 > 0 else 0.0,
-        "delta_bic": delta_bic,
+        "delta_bic": dbic,
         "gap_train": g_train,
         "gap_heldout": g_held,
         "level_dependent": cand.level_dependent,
@@ -615,11 +616,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
                            f"fitted data)")
     after_res = results[best["effect"]] if best else base
     cells_after = localize(rows, after_res["chi_all"])
-    after_map = {(c["direction"], c["segment"], c["dof"], c["f_lo_hz"]): c for c in cells_after}
-    localization = []
-    for c in cells_before:
-        a = after_map[(c["direction"], c["segment"], c["dof"], c["f_lo_hz"])]
-        localization.append({**c, "gap_after": a["gap"], "significant_after": a["significant"]})
+    localization = mark_after(cells_before, cells_after)
     g = {k: {"train": gap_value(r["chi_all"], keys),
              "heldout": _heldout_gap(r["chi_heldout"], keys)}
          for k, r in (("before", base), ("after", after_res))}

@@ -45,9 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..systems.outputs import CHANNEL_NAMES
-from .localize import BANDS, cell_keys, chi2_rows, gap_value
-from .models import Candidate, Predictor, Statics
+from .localize import BANDS, cell_keys, chi2_rows, delta_bic, gap_value, mark_after
+from .models import BASE_PRIOR_SIGMA, Candidate, Predictor, Statics, row_sigma
 
 #: Hat functions in log-frequency over 0.1-12 Hz.
 KNOTS = 6
@@ -78,8 +77,7 @@ def basis(freq: np.ndarray) -> np.ndarray:
 class Discrepancy:
     """delta per (direction, channel) group, shared by the levels."""
 
-    groups: list  # row indices of each group
-    labels: list  # (direction, channel name) of each group
+    groups: list  # row indices of each (direction, channel) group
     B: np.ndarray  # basis at each row
     scale: float  # prior std of each real component of a coefficient
 
@@ -92,8 +90,7 @@ class Discrepancy:
         idx = {k: i for i, k in enumerate(uniq)}
         gid = np.array([idx[k] for k in keys], int)
         groups = [np.flatnonzero(gid == i) for i in range(len(uniq))]
-        labels = [(d, CHANNEL_NAMES[c]) for d, c in uniq]
-        return cls(groups, labels, basis(rows.freq), float(scale))
+        return cls(groups, basis(rows.freq), float(scale))
 
     def solve(self, Hm, Hd, s, mask) -> np.ndarray:
         """MAP coefficients (groups x KNOTS, complex) fitted to the rows in
@@ -116,16 +113,15 @@ class Discrepancy:
             out[g] = Hm[g] * (1.0 + self.B[g] @ c)
         return out
 
+    def absorb(self, Hm, rows, mask):
+        """(model x discrepancy fitted to the rows in `mask`, coefficients)
+        for the model's Hm of every row of `rows`."""
+        C = self.solve(Hm, rows.H, row_sigma(rows.rel_var, rows.H, Hm), mask)
+        return self.apply(Hm, C), C
+
     def prior_residuals(self, C) -> np.ndarray:
         c = C.ravel() / self.scale
         return np.concatenate([c.real, c.imag])
-
-
-def row_sigma(rows, Hm) -> np.ndarray:
-    """Std of each complex component: the data's relative variance times the
-    larger magnitude (as `models.residuals`)."""
-    return np.maximum(np.sqrt(rows.rel_var) * np.maximum(np.abs(rows.H),
-                                                         np.abs(np.nan_to_num(Hm))), 1e-300)
 
 
 def estimate_scale(rows, Hm) -> float:
@@ -133,12 +129,11 @@ def estimate_scale(rows, Hm) -> float:
     model's Hm: per group, the unpenalized least-squares coefficients, whose
     mean square minus their noise variance (diag (A^H A)^-1 per real
     component, the residuals being normalized) is the prior variance."""
-    s = row_sigma(rows, Hm)
-    B = basis(rows.freq)
-    tmp = Discrepancy.for_rows(rows, 1.0)
+    s = row_sigma(rows.rel_var, rows.H, Hm)
+    disc = Discrepancy.for_rows(rows, 1.0)
     signal, noise, n = 0.0, 0.0, 0
-    for g in tmp.groups:
-        A = (Hm[g] / s[g])[:, None] * B[g]
+    for g in disc.groups:
+        A = (Hm[g] / s[g])[:, None] * disc.B[g]
         AhA = A.conj().T @ A
         if np.linalg.cond(AhA) > 1e12:
             continue
@@ -156,10 +151,8 @@ def estimate_scale(rows, Hm) -> float:
 def residuals(pred: Predictor, theta, mask, disc: Discrepancy) -> np.ndarray:
     """Normalized errors of the rows in `mask` with the discrepancy
     profiled out, its prior, and the base prior (as `models.residuals`)."""
-    from .models import BASE_PRIOR_SIGMA
-
     Hm = pred.predict(theta, mask)
-    s = row_sigma(pred.rows, Hm)
+    s = row_sigma(pred.rows.rel_var, pred.rows.H, Hm)
     C = disc.solve(Hm, pred.rows.H, s, mask)
     r = ((disc.apply(Hm, C) - pred.rows.H) / s)[mask]
     return np.concatenate([r.real, r.imag, disc.prior_residuals(C),
@@ -168,9 +161,7 @@ def residuals(pred: Predictor, theta, mask, disc: Discrepancy) -> np.ndarray:
 
 def predict(pred: Predictor, theta, train, disc: Discrepancy) -> np.ndarray:
     """Every row's H: the model times the discrepancy fitted on `train`."""
-    Hm = pred.predict(theta)
-    C = disc.solve(Hm, pred.rows.H, row_sigma(pred.rows, Hm), train)
-    return disc.apply(Hm, C), C
+    return disc.absorb(pred.predict(theta), pred.rows, train)
 
 
 def fit(pred: Predictor, mask, disc: Discrepancy, theta0, free, max_iterations: int = 25):
@@ -251,14 +242,12 @@ def _evaluate(name: str) -> dict:
     H_all, C_all = predict(pred, theta, every, disc)
     chi_held = np.full(len(rows), np.nan)
     for _, held in folds:
-        th = fit(pred, ~held, disc, theta, free) if len(free) and name != "none" else theta
-        if name == "none":
-            pred.update_statistics(th)
+        # 'none' has no effect parameters: its base stays at the refit.
+        th = fit(pred, ~held, disc, theta, free) if len(free) else theta
         Hh, _ = predict(pred, th, ~held, disc)
         chi_held[held] = chi2_rows(rows.take(held), Hh[held])
     return {"name": name, "theta": theta.tolist(), "chi_all": chi2_rows(rows, H_all),
-            "chi_heldout": chi_held, "H_model": pred.predict(theta), "coefficients": C_all,
-            "wall_s": time.perf_counter() - t0}
+            "chi_heldout": chi_held, "coefficients": C_all, "wall_s": time.perf_counter() - t0}
 
 
 def discrepancy_cells(rows, disc: Discrepancy, C) -> list[dict]:
@@ -325,8 +314,7 @@ def structural_pass(state: dict, first: dict, names, workers, progress) -> dict:
             "gap_heldout": g,
             "reduction_beyond": float(1.0 - g / g_held_d) if g_held_d > 0 else 0.0,
             "effect_share": float((g_held_d - g) / g_held0) if g_held0 > 0 else 0.0,
-            "delta_bic": float(np.nansum(r["chi_heldout"]) - np.nansum(none["chi_heldout"])
-                               + k * math.log(max(2 * n_rows, 2))),
+            "delta_bic": delta_bic(r["chi_heldout"], none["chi_heldout"], k, n_rows),
             "theta_effect": r["theta"][len(state["base_names"]):],
         })
     ranking.sort(key=lambda e: (e["delta_bic"], -e["reduction_beyond"]))
@@ -337,7 +325,6 @@ def structural_pass(state: dict, first: dict, names, workers, progress) -> dict:
     out["results"] = results
     out["none"] = none
     return out
-
 
 
 def apply_to_report(report: dict, sp: dict, rows) -> None:
@@ -384,8 +371,4 @@ def apply_to_report(report: dict, sp: dict, rows) -> None:
                f"{100 * best['reduction_beyond']:.0f}% of what remains, < "
                f"{100 * EXPLAINED_BEYOND:.0f}%)" if best else "No candidate was tried"))
         after = sp["none"]["chi_all"]
-    cells_after = {(c["direction"], c["segment"], c["dof"], c["f_lo_hz"]): c
-                   for c in localize(rows, after)}
-    for c in report["localization"]:
-        a = cells_after[(c["direction"], c["segment"], c["dof"], c["f_lo_hz"])]
-        c["gap_after"], c["significant_after"] = a["gap"], a["significant"]
+    report["localization"] = mark_after(report["localization"], localize(rows, after))

@@ -25,6 +25,7 @@ the measurement noise; see `gap_value`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -174,6 +175,22 @@ def chi2_rows(rows: Rows, H_model: np.ndarray) -> np.ndarray:
     measured one alone is biased low where the coherence is poor)."""
     mag2 = np.maximum(np.abs(rows.H), np.abs(H_model)) ** 2
     return np.abs(H_model - rows.H) ** 2 / (rows.rel_var * mag2 + 1e-300)
+
+
+def delta_bic(chi_held: np.ndarray, chi_held_ref: np.ndarray, k: int, n_rows: int) -> float:
+    """Held-out chi^2 change against a reference fit plus the BIC penalty
+    k ln(2n) of k extra parameters on n complex rows (< 0: supported)."""
+    return float(np.nansum(chi_held) - np.nansum(chi_held_ref) + k * math.log(max(2 * n_rows, 2)))
+
+
+def mark_after(cells_before: list[dict], cells_after: list[dict]) -> list[dict]:
+    """The cells before, each with the gap and significance it has after."""
+    after = {(c["direction"], c["segment"], c["dof"], c["f_lo_hz"]): c for c in cells_after}
+    out = []
+    for c in cells_before:
+        a = after[(c["direction"], c["segment"], c["dof"], c["f_lo_hz"])]
+        out.append({**c, "gap_after": a["gap"], "significant_after": a["significant"]})
+    return out
 
 
 def gap_value(chi: np.ndarray, keys: np.ndarray | None = None) -> float:

@@ -513,13 +513,20 @@ class CandidateFit:
         return self.candidate.values(self.theta[n_base:])
 
 
+def row_sigma(rel_var, Hd, Hm) -> np.ndarray:
+    """Std of each complex component of a row's error: the data's relative
+    variance times the larger of the measured and modelled magnitudes (rows
+    the model did not evaluate, NaN, take the measured one)."""
+    return np.maximum(np.sqrt(rel_var) * np.maximum(np.abs(Hd), np.abs(np.nan_to_num(Hm))),
+                      1e-300)
+
+
 def residuals(pred: Predictor, theta, mask) -> np.ndarray:
     """Normalised complex errors of the rows in `mask` (real and imaginary
     parts), then the prior on the base log-scales."""
     Hm = pred.predict(theta, mask)[mask]
     Hd = pred.rows.H[mask]
-    s = np.sqrt(pred.rows.rel_var[mask]) * np.maximum(np.abs(Hd), np.abs(Hm))
-    r = (Hm - Hd) / np.maximum(s, 1e-300)
+    r = (Hm - Hd) / row_sigma(pred.rows.rel_var[mask], Hd, Hm)
     return np.concatenate([r.real, r.imag, theta[:pred.n_base] / BASE_PRIOR_SIGMA])
 
 
