@@ -14,6 +14,7 @@ per-step total (discrete update + framework + outputs at 200 Hz).
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -30,6 +31,8 @@ def main() -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     params = load_params()
+    if len(sys.argv) > 1:
+        params.simulation.time_step_s = float(sys.argv[1])
     settled = settle(params)
     model = build_diagram(params)
     ctx = model.diagram.CreateDefaultContext()

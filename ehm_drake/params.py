@@ -156,6 +156,12 @@ class Restraints:
 
 @dataclass
 class Simulation:
+    #: "implicit": Cardan joint chains whose stiff feedback (passive springs,
+    #: PID proportional and derivative parts) the plant's SAP solve
+    #: integrates implicitly, so the step is set by accuracy; "reference":
+    #: the paper's 1 ms design with spherical joints and explicit feedback
+    #: (`reference_design`).
+    design: str
     time_step_s: float
     settle_time_s: float
     onset_time_s: float
@@ -268,7 +274,8 @@ RANGES: tuple[Range, ...] = (
 )
 
 #: The allowed values of the text parameters.
-CHOICES: dict[str, tuple[str, ...]] = {"contact.model": ("point", "hydroelastic")}
+CHOICES: dict[str, tuple[str, ...]] = {"contact.model": ("point", "hydroelastic"),
+                                       "simulation.design": ("implicit", "reference")}
 
 
 @functools.cache
@@ -580,6 +587,20 @@ def save_params(params: ModelParams, path: str | Path) -> None:
         path.write_text(json.dumps(data, indent=2))
     else:
         path.write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+#: Time step of the reference design (the paper's 1 ms).
+REFERENCE_TIME_STEP_S = 0.001
+
+
+def reference_design(params: ModelParams) -> ModelParams:
+    """A copy of `params` on the reference design: spherical joints with the
+    feedback explicit, at the paper's 1 ms step (`ehm-drake simulate
+    --reference`; the accuracy reference of the implicit design)."""
+    p = params.copy()
+    p.simulation.design = "reference"
+    p.simulation.time_step_s = REFERENCE_TIME_STEP_S
+    return p
 
 
 def apply_variant(params: ModelParams, variant: str) -> ModelParams:

@@ -13,8 +13,14 @@ from ehm_drake.model.anthropometry import (
     BodyMeasures,
     build_body,
 )
-from ehm_drake.model.plant import add_seated_human, model_directory
-from ehm_drake.model.sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
+from ehm_drake.model.plant import CARDAN_JOINTS, add_seated_human, model_directory
+from ehm_drake.model.sdf_writer import (
+    HUMAN_CARDAN_SDF_NAME,
+    HUMAN_SDF_NAME,
+    SEAT_SDF_NAME,
+    human_sdf,
+    seat_sdf,
+)
 from ehm_drake.systems.joints import cardan_to_generalized, rpy_rate_matrices
 
 #: Module fixtures: the module's tests stay on one xdist worker (built once).
@@ -94,6 +100,7 @@ def test_sdf_on_disk_is_generated_from_the_anthropometry():
     body = build_body()
     d = model_directory()
     assert (d / HUMAN_SDF_NAME).read_text() == human_sdf(body)
+    assert (d / HUMAN_CARDAN_SDF_NAME).read_text() == human_sdf(body, CARDAN_JOINTS)
     assert (d / SEAT_SDF_NAME).read_text() == seat_sdf(body)
     assert (d / "package.xml").is_file()
 

@@ -53,13 +53,27 @@ from pydrake.multibody.plant import (
     MultibodyPlant,
     MultibodyPlantConfig,
 )
-from pydrake.multibody.tree import BallRpyJoint, RevoluteJoint, RpyFloatingJoint, UniversalJoint
+from pydrake.multibody.tree import (
+    BallRpyJoint,
+    PdControllerGains,
+    RevoluteJoint,
+    RpyFloatingJoint,
+    UniversalJoint,
+)
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import ConstantVectorSource
 
 from ..params import CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
 from .anthropometry import REFERENCE, Body, BodyMeasures, build_body
 from .extensions import ModelExtension, merge_options, resolve_extensions, validate_extensions
-from .sdf_writer import HUMAN_SDF_NAME, SEAT_SDF_NAME, human_sdf, seat_sdf
+from .sdf_writer import (
+    HUMAN_CARDAN_SDF_NAME,
+    HUMAN_SDF_NAME,
+    SEAT_SDF_NAME,
+    cardan_joint,
+    human_sdf,
+    seat_sdf,
+)
 
 PACKAGE_NAME = "ehm_drake"
 #: Nominal share of body weight carried by each contact pair in the erect,
@@ -108,6 +122,10 @@ def configure_parser(parser: Parser) -> Parser:
     return parser
 
 
+#: The human's own rotational joints (the Cardan restraints of the paper).
+CARDAN_JOINTS = tuple(j for joints in PASSIVE_GROUPS.values() for j in joints)
+
+
 def _joint_axes(joint) -> list[int]:
     """Cardan axes (0=x, 1=y, 2=z of the joint frame) of a joint's DoFs."""
     if isinstance(joint, BallRpyJoint):
@@ -115,8 +133,21 @@ def _joint_axes(joint) -> list[int]:
     if isinstance(joint, UniversalJoint):
         return [0, 1]
     if isinstance(joint, RevoluteJoint):
-        return [1]
+        axis = np.abs(np.asarray(joint.revolute_axis()))
+        return [int(np.argmax(axis))]
     raise TypeError(type(joint))
+
+
+def joint_dofs(plant: MultibodyPlant, human, name: str) -> list[tuple[int, object, int]]:
+    """The DoFs of the human's joint `name` as (Cardan axis, Drake joint,
+    DoF within that joint), x before y before z: one multi-DoF joint
+    (reference design) or a chain of revolute joints `<name>_x`, ... (the
+    implicit design; see `sdf_writer.human_sdf`)."""
+    if plant.HasJointNamed(name, human):
+        joint = plant.GetJointByName(name, human)
+        return [(axis, joint, i) for i, axis in enumerate(_joint_axes(joint))]
+    return [(axis, plant.GetJointByName(cardan_joint(name, axis), human), 0)
+            for axis in range(3) if plant.HasJointNamed(cardan_joint(name, axis), human)]
 
 
 @dataclass(frozen=True)
@@ -159,6 +190,17 @@ class HumanPlant:
     seat_geometries: dict[str, object]
     contact_model: str
     time_step: float
+    #: "implicit" or "reference" (`params.Simulation.design`).
+    design: str = "reference"
+    #: Stiffness the plant's PD-controlled joint actuators apply, integrated
+    #: implicitly by SAP (implicit design; zeros on the reference design):
+    #: per rotational DoF of `layout` the passive Cardan spring plus the PID's
+    #: proportional gain (N m/rad), then the spine's axial spring (N/m), all
+    #: about the zero (reference) position.  `PassiveJoints` and `JointPid`
+    #: apply only what differs from it.
+    implicit_stiffness: np.ndarray | None = None
+    #: Of `implicit_stiffness`, the PID's proportional part per rotational DoF.
+    implicit_kp: np.ndarray | None = None
     effects: dict = field(default_factory=dict)
     #: The resolved extensions of `effects`, in registration order.
     extensions: tuple[ModelExtension, ...] = ()
@@ -169,16 +211,19 @@ class HumanPlant:
 
 
 def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
-                 extensions: tuple[ModelExtension, ...]):
+                 extensions: tuple[ModelExtension, ...], cardan: bool):
     """The packaged SDF for the reference body without extensions, else
-    SDF generated from `body` (and the extensions' seat options)."""
+    SDF generated from `body` (and the extensions' seat options); with
+    `cardan`, the human's joints as Cardan chains of revolute joints."""
     parser = configure_parser(Parser(plant))
     if measures == REFERENCE and not extensions:
-        (human,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{HUMAN_SDF_NAME}")
+        name = HUMAN_CARDAN_SDF_NAME if cardan else HUMAN_SDF_NAME
+        (human,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{name}")
         (seat,) = parser.AddModels(url=f"package://{PACKAGE_NAME}/{SEAT_SDF_NAME}")
     else:
         seat_options = merge_options(extensions, "seat_options")
-        (human,) = parser.AddModelsFromString(human_sdf(body), "sdf")
+        (human,) = parser.AddModelsFromString(
+            human_sdf(body, CARDAN_JOINTS if cardan else ()), "sdf")
         (seat,) = parser.AddModelsFromString(seat_sdf(body, **seat_options), "sdf")
     return human, seat
 
@@ -214,26 +259,39 @@ def add_seated_human(
     )
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
-    human, seat = _load_models(plant, body, measures, extensions)
+    design = params.simulation.design
+    human, seat = _load_models(plant, body, measures, extensions, design == "implicit")
     pelvis = plant.GetBodyByName("pelvis", human)
     free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
     free.set_default_translation(body.segments["pelvis"].origin_W)
     _set_default_joint_damping(plant, human, params)
+    if design == "implicit":
+        implicit = _add_pd_actuators(plant, human, params)
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
     for ext in extensions:
         ext.add_plant_elements(plant, human, seat, body)
     plant.Finalize()
+    layout = _joint_layout(plant, human)
+    if design == "implicit":
+        implicit_k, implicit_kp = implicit(layout)
+        _connect_pd_targets(builder, plant, human)
+    else:
+        implicit_k = np.zeros(layout.num_rotational + 1)
+        implicit_kp = np.zeros(layout.num_rotational)
     return HumanPlant(
         plant=plant,
         scene_graph=scene_graph,
         body=body,
         human=human,
         seat=seat,
-        layout=_joint_layout(plant, human),
+        layout=layout,
         body_geometries=body_geoms,
         seat_geometries=seat_geoms,
         contact_model=params.contact.model,
         time_step=params.simulation.time_step_s,
+        design=design,
+        implicit_stiffness=implicit_k,
+        implicit_kp=implicit_kp,
         effects=effects,
         extensions=extensions,
     )
@@ -243,11 +301,16 @@ def _joint_layout(plant: MultibodyPlant, human) -> JointLayout:
     entries = []
     for group, joints in PASSIVE_GROUPS.items():
         for jname in joints:
-            joint = plant.GetJointByName(jname, human)
-            for i, axis in enumerate(_joint_axes(joint)):
+            for axis, joint, i in joint_dofs(plant, human, jname):
                 entries.append((joint.velocity_start() + i, joint.position_start() + i,
                                 jname, group, axis, isinstance(joint, BallRpyJoint)))
-    entries.sort()
+    # Joint by joint in the tree's order, x, y, z within a joint (whatever
+    # the order of a Cardan chain's revolutes), so both designs list the
+    # DoFs alike.
+    first = {}
+    for e in entries:
+        first[e[2]] = min(first.get(e[2], e[0]), e[0])
+    entries.sort(key=lambda e: (first[e[2]], e[4]))
     triplets = [[i, i + 1, i + 2] for i, e in enumerate(entries) if e[5] and e[4] == 0]
     spine = plant.GetJointByName("spinal_compression", human)
     return JointLayout(
@@ -308,7 +371,7 @@ def pid_vectors(params: ModelParams, layout: JointLayout) -> dict[str, np.ndarra
     return {"kp": kp, "ki": ki, "kd": kd, "integral_limit": limit}
 
 
-def _joint_damping(params: ModelParams, joint) -> np.ndarray:
+def _joint_damping(params: ModelParams, name: str, axes) -> np.ndarray:
     """Joint damping = passive damping + the PID's derivative gain.
 
     The derivative action -Kd v is exactly a joint damper, and as joint
@@ -317,34 +380,105 @@ def _joint_damping(params: ModelParams, joint) -> np.ndarray:
     1 ms (c h / I ~ 1.8 of the limit 2); so the PID applies P and I and the
     plant applies D (the PID still reports the full P+I+D torque)."""
     for group, joints in PASSIVE_GROUPS.items():
-        if joint.name() in joints:
-            axes = _joint_axes(joint)
+        if name in joints:
             passive = np.asarray(getattr(params.passive, group).damping, float)[axes]
             kd = np.asarray(getattr(params.pid, PID_GROUP_OF[group]).kd, float)[axes]
-            return passive + kd
-    raise KeyError(joint.name())
+            k = np.asarray(getattr(params.passive, group).stiffness, float)[axes]
+            kp = np.asarray(getattr(params.pid, PID_GROUP_OF[group]).kp, float)[axes]
+            return step_damping(params, passive + kd, k + kp)
+    raise KeyError(name)
+
+
+def step_damping(params: ModelParams, damping, stiffness):
+    """The damping to give SAP so that, with `stiffness` integrated
+    implicitly, the step's damping is `damping` (implicit design).
+
+    SAP evaluates an implicit spring at the step's end, k (q + h v+): to
+    first order in h that is the spring plus a damper h k, which damps a
+    5 Hz mode at 5 ms by omega h / 2 = 0.08 more than the model says (the
+    vertical transmissibility peak falls by ~10%).  Giving the damper
+    c - h k instead leaves the step's damping c, with an O((omega h)^2)
+    error left.  Clipped at zero; the reference design's stiffness is
+    explicit and its damping is left as it is."""
+    damping = np.asarray(damping, float)
+    if params.simulation.design != "implicit":
+        return damping
+    return np.maximum(damping - params.simulation.time_step_s * np.asarray(stiffness, float),
+                      0.0)
+
+
+def _each_joint(plant, human):
+    """(name, Drake joint, its Cardan axes) of the human's rotational joints
+    (one entry per Drake joint: per revolute of a Cardan chain)."""
+    for jname in CARDAN_JOINTS:
+        dofs = joint_dofs(plant, human, jname)
+        for joint in dict.fromkeys(j for _, j, _ in dofs):
+            yield jname, joint, [axis for axis, j, _ in dofs if j is joint]
 
 
 def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
-    for joints in PASSIVE_GROUPS.values():
-        for jname in joints:
-            joint = plant.GetJointByName(jname, human)
-            joint.set_default_damping_vector(_joint_damping(params, joint))
+    for jname, joint, axes in _each_joint(plant, human):
+        joint.set_default_damping_vector(_joint_damping(params, jname, axes))
     plant.GetJointByName("spinal_compression", human).set_default_damping_vector(
-        [params.passive.spine_axial_damping]
+        [float(step_damping(params, params.passive.spine_axial_damping,
+                            params.passive.spine_axial_stiffness))]
     )
+
+
+def _add_pd_actuators(plant, human, params: ModelParams):
+    """Implicit design: a PD-controlled actuator on every rotational DoF with
+    stiffness (passive Cardan spring + PID proportional gain, about the
+    reference angle 0) and on the spinal compression (its axial spring).
+    SAP integrates their stiffness implicitly; their damping stays the
+    joints' (also implicit).  Returns the stiffness per DoF in layout order
+    (rotational DoFs, then the spine) and its PID part, as functions of the
+    finalized layout."""
+    stiffness, kp_part, order = {}, {}, []  # per Drake joint; kp per (joint, axis)
+    for jname, joint, axes in _each_joint(plant, human):
+        group = next(g for g, joints in PASSIVE_GROUPS.items() if jname in joints)
+        (axis,) = axes
+        k = float(getattr(params.passive, group).stiffness[axis])
+        kp = float(getattr(params.pid, PID_GROUP_OF[group]).kp[axis])
+        order.append(joint)
+        stiffness[joint.name()] = k + kp
+        kp_part[jname, axis] = kp
+    spine = plant.GetJointByName("spinal_compression", human)
+    order.append(spine)
+    stiffness[spine.name()] = float(params.passive.spine_axial_stiffness)
+    for joint in order:
+        if stiffness[joint.name()] > 0:
+            actuator = plant.AddJointActuator(f"{joint.name()}_pd", joint)
+            actuator.set_controller_gains(PdControllerGains(p=stiffness[joint.name()], d=0.0))
+
+    def in_layout(layout: JointLayout):
+        kp = np.array([kp_part[dof] for dof in zip(layout.joints, layout.axes, strict=True)])
+        k = passive_stiffness_vector(params, layout)
+        return np.append(k[:-1] + kp, k[-1]), kp
+
+    return in_layout
 
 
 def set_joint_damping(hp: HumanPlant, plant_context, params: ModelParams) -> None:
     """Write the joint damping (passive + PID derivative gain) of `params`
     into `plant_context`."""
-    for joints in PASSIVE_GROUPS.values():
-        for jname in joints:
-            joint = hp.plant.GetJointByName(jname, hp.human)
-            joint.SetDampingVector(plant_context, _joint_damping(params, joint))
+    for jname, joint, axes in _each_joint(hp.plant, hp.human):
+        joint.SetDampingVector(plant_context, _joint_damping(params, jname, axes))
     hp.plant.GetJointByName("spinal_compression", hp.human).SetDampingVector(
-        plant_context, [params.passive.spine_axial_damping]
+        plant_context, [float(step_damping(params, params.passive.spine_axial_damping,
+                                           params.passive.spine_axial_stiffness))]
     )
+
+
+def _connect_pd_targets(builder: DiagramBuilder, plant, human) -> None:
+    """The PD actuators' set points: every joint at its reference angle (0)
+    at rest; no feed-forward actuation (the slow loops act through the
+    applied generalized force)."""
+    port = plant.get_desired_state_input_port(human)
+    target = builder.AddNamedSystem("pd_targets", ConstantVectorSource(np.zeros(port.size())))
+    builder.Connect(target.get_output_port(), port)
+    u = builder.AddNamedSystem("pd_feedforward",
+                               ConstantVectorSource(np.zeros(plant.num_actuated_dofs())))
+    builder.Connect(u.get_output_port(), plant.get_actuation_input_port())
 
 
 # ---------------------------------------------------------------------------
@@ -374,8 +508,11 @@ def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weig
         friction=CoulombFriction(0.0, 0.0),
         properties=props,
     )
-    # Relaxation times add up over the pair; the seat's is zero.
-    props.AddProperty("material", "relaxation_time", cp.damping / cp.stiffness)
+    # Relaxation times add up over the pair; the seat's is zero.  SAP's
+    # contact force is implicit, k (x + tau xdot) at the step's end (see
+    # `step_damping`).
+    props.AddProperty("material", "relaxation_time",
+                      float(step_damping(params, cp.damping, cp.stiffness)) / cp.stiffness)
     if params.contact.model == "hydroelastic":
         load = NOMINAL_LOAD_SHARE[pair] * body_weight
         AddCompliantHydroelasticProperties(

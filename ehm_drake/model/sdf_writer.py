@@ -22,6 +22,20 @@ HUMAN_MODEL_NAME = "ehm_human"
 SEAT_MODEL_NAME = "ehm_seat"
 SDF_DIR = Path(__file__).resolve().parents[2] / "sdf"
 HUMAN_SDF_NAME = "ehm_human_50th_male.sdf"
+#: The same body with its spherical and universal joints as chains of revolute
+#: joints on the Cardan angles (see `human_sdf`).
+HUMAN_CARDAN_SDF_NAME = "ehm_human_50th_male_cardan.sdf"
+#: Axes of the Cardan chain of each joint type, parent to child (0 = x).
+#: Drake's ball joint is R = Rz(yaw) Ry(pitch) Rx(roll) (space-fixed x-y-z):
+#: the chain rotates about z first, then y, then x, so its three angles are
+#: exactly the ball joint's roll, pitch and yaw.  The universal joint is
+#: R = Rx(q1) Ry(q2).
+CARDAN_AXES = {"ball": (2, 1, 0), "ball+prismatic": (2, 1, 0), "universal": (0, 1)}
+#: Mass (kg) and inertia (kg m^2) of the links between a chain's revolute
+#: joints: Drake needs a body there; a tenth of a gram is 1e-5 of the
+#: lightest segment (the foot) and changes no mode measurably.
+GIMBAL_MASS_KG = 1e-4
+GIMBAL_INERTIA = 1e-8
 SEAT_SDF_NAME = "ehm_seat_erect_high_support.sdf"
 
 SKIN = "0.87 0.72 0.60 1"
@@ -90,8 +104,29 @@ def _arm_shapes(lm, side, capsule):
             capsule(lm[f"wrist_{side}"], lm[f"hand_{side}"], 0.028)]
 
 
-def human_sdf(body: Body) -> str:
-    """SDFormat text of the human model for `body`."""
+def gimbal_link(joint_name: str, k: int) -> str:
+    """Name of link `k` (1, 2) between the revolute joints of a Cardan chain."""
+    return f"{joint_name}_gimbal_{k}"
+
+
+def cardan_joint(joint_name: str, axis: int) -> str:
+    """Name of the revolute joint about `axis` (0, 1, 2) of a Cardan chain."""
+    return f"{joint_name}_{'xyz'[axis]}"
+
+
+def human_sdf(body: Body, cardan_joints=()) -> str:
+    """SDFormat text of the human model for `body`.
+
+    The spherical and universal joints named in `cardan_joints` are written
+    as chains of revolute joints whose angles are the joint's Cardan angles
+    (`CARDAN_AXES`; the paper's "restraint cardan", Desai et al. Sec. II):
+    the same kinematics, with the angle rates as generalized velocities, so
+    that joint stiffness and PD control act on single-DoF joints, which
+    Drake's SAP solver integrates implicitly.  Joint `<name>`'s revolute
+    about x is `<name>_x` (`cardan_joint`); the links between them are
+    `<name>_gimbal_1`, `_2` (`gimbal_link`).  Revolute joints stay as
+    they are."""
+    cardan_joints = frozenset(cardan_joints)
     m = body.measures
     lines = [
         '<?xml version="1.0"?>',
@@ -159,11 +194,43 @@ def human_sdf(body: Body) -> str:
                 "<izz>1e-08</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia></inertial>",
                 "  </link>",
             ]
+        if seg.joint_name in cardan_joints and seg.joint in CARDAN_AXES:
+            for k in range(1, len(CARDAN_AXES[seg.joint])):
+                lines += [
+                    f'  <link name="{gimbal_link(seg.joint_name, k)}">',
+                    f"    <pose>{_pose(o)}</pose>",
+                    f"    <inertial><mass>{GIMBAL_MASS_KG:g}</mass><inertia>"
+                    f"<ixx>{GIMBAL_INERTIA:g}</ixx><iyy>{GIMBAL_INERTIA:g}</iyy>"
+                    f"<izz>{GIMBAL_INERTIA:g}</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz>"
+                    "</inertia></inertial>",
+                    "  </link>",
+                ]
 
     for name, seg in body.segments.items():
         if seg.joint in (None, "free"):
             continue
-        if seg.joint == "ball":
+        if seg.joint_name in cardan_joints and seg.joint in CARDAN_AXES:
+            parent = seg.parent
+            if seg.joint == "ball+prismatic":
+                lines += [
+                    '  <joint name="spinal_compression" type="prismatic">',
+                    f"    <parent>{seg.parent}</parent><child>spine_slider</child>",
+                    "    <axis><xyz>0 0 1</xyz><limit><effort>0</effort></limit></axis>",
+                    "  </joint>",
+                ]
+                parent = "spine_slider"
+            axes = CARDAN_AXES[seg.joint]
+            for k, axis in enumerate(axes):
+                child = name if k == len(axes) - 1 else gimbal_link(seg.joint_name, k + 1)
+                unit = " ".join("1" if i == axis else "0" for i in range(3))
+                lines += [
+                    f'  <joint name="{cardan_joint(seg.joint_name, axis)}" type="revolute">',
+                    f"    <parent>{parent}</parent><child>{child}</child>",
+                    f"    <axis><xyz>{unit}</xyz><limit><effort>0</effort></limit></axis>",
+                    "  </joint>",
+                ]
+                parent = child
+        elif seg.joint == "ball":
             lines += [
                 f'  <joint name="{seg.joint_name}" type="ball">',
                 f"    <parent>{seg.parent}</parent><child>{name}</child>",
@@ -304,7 +371,12 @@ def write_reference_sdf(directory: Path = SDF_DIR) -> list[Path]:
     """Regenerate the 50th-percentile SDF files in `directory`."""
     body = build_body(REFERENCE)
     paths = []
-    for fname, text in ((HUMAN_SDF_NAME, human_sdf(body)), (SEAT_SDF_NAME, seat_sdf(body))):
+    from ..params import PASSIVE_GROUPS
+
+    cardan = [j for joints in PASSIVE_GROUPS.values() for j in joints]
+    for fname, text in ((HUMAN_SDF_NAME, human_sdf(body)),
+                        (HUMAN_CARDAN_SDF_NAME, human_sdf(body, cardan)),
+                        (SEAT_SDF_NAME, seat_sdf(body))):
         path = Path(directory) / fname
         path.write_text(text)
         paths.append(path)

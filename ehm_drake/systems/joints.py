@@ -13,9 +13,13 @@ damping (implicit in SAP).
 
 The PID acts on the generalized coordinates: the joint angles q (error
 against the reference posture) and the joint velocities v, and returns
-generalized forces (torques about the joint's parent-frame axes).  At the
-reference posture (all angles zero) this is the Cardan PID exactly; for the
-few degrees of a vibration study the difference is second order.
+generalized forces.  On the implicit design's Cardan chains these are the
+Cardan angles, their rates and Cardan torques exactly.  On the reference
+design's ball joints the torques act on the angular-velocity coordinates
+(about the joint's parent-frame axes): the same at the reference posture,
+but a joint holding a static torque (the integral action under the body's
+weight) gets a slightly different stiffness than with Cardan torques (see
+README, "Two designs").
 
 Both are `TemplateSystem`s (float, AutoDiffXd).
 """
@@ -82,11 +86,20 @@ def PassiveJoints_(T):
         Numeric parameter ``stiffness_and_neutral``: per rotational DoF the
         stiffness (N m/rad), then the axial stiffness (N/m); then the
         spring-free positions in the same layout (rad, m).
+
+        `implicit` (same layout as the stiffness; implicit design): the
+        stiffness about position 0 that the plant's PD actuators already
+        apply (`HumanPlant.implicit_stiffness`); the output is the springs'
+        force minus that, zero when the parameters are those the plant was
+        built with.
         """
 
-        def _construct(self, layout: JointLayout, stiffness, neutral, converter=None):
+        def _construct(self, layout: JointLayout, stiffness, neutral, implicit=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._layout = layout
+            self._implicit = None if implicit is None or not np.any(implicit) \
+                else np.asarray(implicit, float)
             self._ball = _BallIndex(layout)
             n = layout.num_rotational + 1
             stiffness = np.asarray(stiffness, float)
@@ -102,7 +115,7 @@ def PassiveJoints_(T):
         def _construct_copy(self, other, converter=None):
             n = len(other._init) // 2
             Impl._construct(self, other._layout, other._init[:n], other._init[n:],
-                            converter=converter)
+                            other._implicit, converter=converter)
 
         @property
         def parameter_index(self):
@@ -114,6 +127,8 @@ def PassiveJoints_(T):
             n = len(self._q_index)
             q = x[self._q_index]
             tau = -kq0[:n] * (q - kq0[n:])
+            if self._implicit is not None:
+                tau = tau + self._implicit * q
             f = np.zeros(self._layout.nv, dtype=tau.dtype)
             f[self._v_index] = cardan_to_generalized(self._ball, q, tau)
             output.SetFromVector(f)
@@ -141,13 +156,23 @@ def JointPid_(T):
         (one per rotational DoF, N m, for logging).  Numeric parameter
         ``gains``: kp, ki, kd, integral_limit, reference, each one value per
         rotational DoF, concatenated in that order (`PID_PARAMETERS`).
+
+        The plant applies the derivative part as joint damping
+        (`derivative_in_plant`) and, on the implicit design, the
+        proportional part `implicit_kp` about angle 0 in its PD actuators;
+        the generalized force is the PID torque minus those.  With
+        `implicit_kp`, an input ``plant_state`` gives the state the plant's
+        actuators see (the PID's ``state`` may be delayed).
         """
 
         def _construct(self, layout: JointLayout, kp, ki, kd, integral_limit, reference,
-                       period: float, derivative_in_plant: bool = True, converter=None):
+                       period: float, derivative_in_plant: bool = True, implicit_kp=None,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._layout = layout
             self._derivative_in_plant = bool(derivative_in_plant)
+            self._implicit_kp = None if implicit_kp is None or not np.any(implicit_kp) \
+                else np.asarray(implicit_kp, float)
             n = layout.num_rotational
             parts = [np.asarray(a, float) for a in (kp, ki, kd, integral_limit, reference)]
             for a in parts:
@@ -155,6 +180,9 @@ def JointPid_(T):
             self._init = np.concatenate(parts)
             self._period = float(period)
             self._state_port = self.DeclareVectorInputPort("state", layout.nq + layout.nv)
+            if self._implicit_kp is not None:
+                self._plant_port = self.DeclareVectorInputPort("plant_state",
+                                                               layout.nq + layout.nv)
             self._param = self.DeclareNumericParameter(BasicVector_[T](self._init))
             # The integral bound |z| <= limit/ki, derived once from the gains.
             self._bound = self.DeclareCacheEntry(
@@ -171,7 +199,7 @@ def JointPid_(T):
             n = other._layout.num_rotational
             parts = [other._init[i * n:(i + 1) * n] for i in range(5)]
             Impl._construct(self, other._layout, *parts, other._period,
-                            other._derivative_in_plant, converter=converter)
+                            other._derivative_in_plant, other._implicit_kp, converter=converter)
 
         @property
         def parameter_index(self):
@@ -198,6 +226,8 @@ def JointPid_(T):
                 g = context.get_numeric_parameter(self._param).CopyToVector()
                 x = self._state_port.Eval(context)
                 tau = tau + g[2 * n:3 * n] * x[L.nq + L.rot_v]  # the plant applies -Kd v
+            if self._implicit_kp is not None:  # the plant applies -Kp q
+                tau = tau + self._implicit_kp * self._plant_port.Eval(context)[L.rot_q]
             f = np.zeros(L.nv, dtype=tau.dtype)
             f[L.rot_v] = tau
             output.SetFromVector(f)
