@@ -171,16 +171,14 @@ def build_diagram(
     k = passive_stiffness_vector(params, layout)
     passive = builder.AddNamedSystem(
         "passive_joints",
-        PassiveJoints(layout, k, np.zeros(len(k)),
-                      hp.implicit_stiffness - np.append(hp.implicit_kp, 0.0)))
+        PassiveJoints(layout, k, np.zeros(len(k)), hp.implicit_passive))
     gains = pid_vectors(params, layout)
     pid = builder.AddNamedSystem(
         "joint_pid",
         JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
                  np.zeros(layout.num_rotational), h, implicit_kp=hp.implicit_kp))
-    if hp.design == "implicit":
-        if pid.num_input_ports() > 1:
-            builder.Connect(state, pid.GetInputPort("plant_state"))
+    if pid.HasInputPort("plant_state"):  # implicit design: the plant applies kp
+        builder.Connect(state, pid.GetInputPort("plant_state"))
     # Seat: inertial load of the seat motion, shear restraints.
     inertial = builder.AddNamedSystem("seat_inertial_load",
                                       SeatInertialLoad(plant, [hp.human, hp.seat]))

@@ -43,6 +43,9 @@ PASSIVE_GROUPS: dict[str, tuple[str, ...]] = {
     "knees": ("knee_l", "knee_r"),
     "ankles": ("ankle_l", "ankle_r"),
 }
+#: The human's own rotational joints (the Cardan restraints of the paper):
+#: those the implicit design writes as Cardan chains of revolute joints.
+CARDAN_JOINTS: tuple[str, ...] = tuple(j for joints in PASSIVE_GROUPS.values() for j in joints)
 #: Joint groups of the PID controllers (the issue's spine/neck/hips/knees/ankles).
 PID_GROUPS: dict[str, tuple[str, ...]] = {
     "spine": PASSIVE_GROUPS["lumbar"] + PASSIVE_GROUPS["thoracic"],
@@ -595,8 +598,8 @@ REFERENCE_TIME_STEP_S = 0.001
 
 def reference_design(params: ModelParams) -> ModelParams:
     """A copy of `params` on the reference design: spherical joints with the
-    feedback explicit, at the paper's 1 ms step (`ehm-drake simulate
-    --reference`; the accuracy reference of the implicit design)."""
+    feedback explicit, at the paper's 1 ms step (the accuracy reference of
+    the implicit design, `bench/bench_step_accuracy.py`)."""
     p = params.copy()
     p.simulation.design = "reference"
     p.simulation.time_step_s = REFERENCE_TIME_STEP_S

@@ -63,7 +63,7 @@ from pydrake.multibody.tree import (
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from ..params import CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
+from ..params import CARDAN_JOINTS, CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
 from .anthropometry import REFERENCE, Body, BodyMeasures, build_body
 from .extensions import ModelExtension, merge_options, resolve_extensions, validate_extensions
 from .sdf_writer import (
@@ -120,10 +120,6 @@ def configure_parser(parser: Parser) -> Parser:
     if not pm.Contains(PACKAGE_NAME):
         pm.Add(PACKAGE_NAME, str(model_directory()))
     return parser
-
-
-#: The human's own rotational joints (the Cardan restraints of the paper).
-CARDAN_JOINTS = tuple(j for joints in PASSIVE_GROUPS.values() for j in joints)
 
 
 def _joint_axes(joint) -> list[int]:
@@ -192,18 +188,24 @@ class HumanPlant:
     time_step: float
     #: "implicit" or "reference" (`params.Simulation.design`).
     design: str = "reference"
-    #: Stiffness the plant's PD-controlled joint actuators apply, integrated
-    #: implicitly by SAP (implicit design; zeros on the reference design):
-    #: per rotational DoF of `layout` the passive Cardan spring plus the PID's
-    #: proportional gain (N m/rad), then the spine's axial spring (N/m), all
-    #: about the zero (reference) position.  `PassiveJoints` and `JointPid`
-    #: apply only what differs from it.
-    implicit_stiffness: np.ndarray | None = None
-    #: Of `implicit_stiffness`, the PID's proportional part per rotational DoF.
+    #: The stiffness the plant's PD-controlled joint actuators apply, about
+    #: the zero (reference) position, integrated implicitly by SAP (implicit
+    #: design; zeros on the reference design), in two parts:
+    #: `implicit_passive`, the passive Cardan spring per rotational DoF of
+    #: `layout` (N m/rad) then the spine's axial spring (N/m), applied instead
+    #: of `PassiveJoints`; `implicit_kp`, the PID's proportional gain per
+    #: rotational DoF, applied instead of `JointPid`.  Those systems apply
+    #: only what differs from it.
+    implicit_passive: np.ndarray | None = None
     implicit_kp: np.ndarray | None = None
     effects: dict = field(default_factory=dict)
     #: The resolved extensions of `effects`, in registration order.
     extensions: tuple[ModelExtension, ...] = ()
+
+    @property
+    def implicit_stiffness(self) -> np.ndarray:
+        """Each PD actuator's stiffness: the sum of the two parts."""
+        return self.implicit_passive + np.append(self.implicit_kp, 0.0)
 
     @property
     def num_dofs(self) -> int:
@@ -266,18 +268,18 @@ def add_seated_human(
     free.set_default_translation(body.segments["pelvis"].origin_W)
     _set_default_joint_damping(plant, human, params)
     if design == "implicit":
-        implicit = _add_pd_actuators(plant, human, params)
+        _add_pd_actuators(plant, human, params)
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
     for ext in extensions:
         ext.add_plant_elements(plant, human, seat, body)
     plant.Finalize()
     layout = _joint_layout(plant, human)
+    implicit_k = passive_stiffness_vector(params, layout)
+    implicit_kp = pid_vectors(params, layout)["kp"]
     if design == "implicit":
-        implicit_k, implicit_kp = implicit(layout)
         _connect_pd_targets(builder, plant, human)
     else:
-        implicit_k = np.zeros(layout.num_rotational + 1)
-        implicit_kp = np.zeros(layout.num_rotational)
+        implicit_k, implicit_kp = 0.0 * implicit_k, 0.0 * implicit_kp
     return HumanPlant(
         plant=plant,
         scene_graph=scene_graph,
@@ -290,7 +292,7 @@ def add_seated_human(
         contact_model=params.contact.model,
         time_step=params.simulation.time_step_s,
         design=design,
-        implicit_stiffness=implicit_k,
+        implicit_passive=implicit_k,
         implicit_kp=implicit_kp,
         effects=effects,
         extensions=extensions,
@@ -371,22 +373,25 @@ def pid_vectors(params: ModelParams, layout: JointLayout) -> dict[str, np.ndarra
     return {"kp": kp, "ki": ki, "kd": kd, "integral_limit": limit}
 
 
+def _joint_gains(params: ModelParams, name: str, axes) -> tuple[np.ndarray, np.ndarray]:
+    """Damping (passive + PID derivative gain) and stiffness (passive + PID
+    proportional gain) of the human's joint `name` about its Cardan `axes`."""
+    group = next(g for g, joints in PASSIVE_GROUPS.items() if name in joints)
+    passive, pid = getattr(params.passive, group), getattr(params.pid, PID_GROUP_OF[group])
+    return (np.asarray(passive.damping, float)[axes] + np.asarray(pid.kd, float)[axes],
+            np.asarray(passive.stiffness, float)[axes] + np.asarray(pid.kp, float)[axes])
+
+
 def _joint_damping(params: ModelParams, name: str, axes) -> np.ndarray:
-    """Joint damping = passive damping + the PID's derivative gain.
+    """Joint damping = passive damping + the PID's derivative gain (less
+    what the implicit design's step adds, `step_damping`).
 
     The derivative action -Kd v is exactly a joint damper, and as joint
     damping SAP integrates it implicitly.  Applied as an explicit force it
     is unstable on the 2.3 kg lower-torso slab between L5/S1 and L4/L5 at
     1 ms (c h / I ~ 1.8 of the limit 2); so the PID applies P and I and the
     plant applies D (the PID still reports the full P+I+D torque)."""
-    for group, joints in PASSIVE_GROUPS.items():
-        if name in joints:
-            passive = np.asarray(getattr(params.passive, group).damping, float)[axes]
-            kd = np.asarray(getattr(params.pid, PID_GROUP_OF[group]).kd, float)[axes]
-            k = np.asarray(getattr(params.passive, group).stiffness, float)[axes]
-            kp = np.asarray(getattr(params.pid, PID_GROUP_OF[group]).kp, float)[axes]
-            return step_damping(params, passive + kd, k + kp)
-    raise KeyError(name)
+    return step_damping(params, *_joint_gains(params, name, axes))
 
 
 def step_damping(params: ModelParams, damping, stiffness):
@@ -416,57 +421,41 @@ def _each_joint(plant, human):
             yield jname, joint, [axis for axis, j, _ in dofs if j is joint]
 
 
-def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
+def _joint_damping_vectors(plant, human, params: ModelParams):
+    """(Drake joint, its damping vector) of every joint of the human."""
     for jname, joint, axes in _each_joint(plant, human):
-        joint.set_default_damping_vector(_joint_damping(params, jname, axes))
-    plant.GetJointByName("spinal_compression", human).set_default_damping_vector(
-        [float(step_damping(params, params.passive.spine_axial_damping,
-                            params.passive.spine_axial_stiffness))]
-    )
+        yield joint, _joint_damping(params, jname, axes)
+    spine = params.passive
+    yield (plant.GetJointByName("spinal_compression", human),
+           [float(step_damping(params, spine.spine_axial_damping, spine.spine_axial_stiffness))])
 
 
-def _add_pd_actuators(plant, human, params: ModelParams):
+def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
+    for joint, damping in _joint_damping_vectors(plant, human, params):
+        joint.set_default_damping_vector(damping)
+
+
+def _add_pd_actuators(plant, human, params: ModelParams) -> None:
     """Implicit design: a PD-controlled actuator on every rotational DoF with
     stiffness (passive Cardan spring + PID proportional gain, about the
     reference angle 0) and on the spinal compression (its axial spring).
     SAP integrates their stiffness implicitly; their damping stays the
-    joints' (also implicit).  Returns the stiffness per DoF in layout order
-    (rotational DoFs, then the spine) and its PID part, as functions of the
-    finalized layout."""
-    stiffness, kp_part, order = {}, {}, []  # per Drake joint; kp per (joint, axis)
-    for jname, joint, axes in _each_joint(plant, human):
-        group = next(g for g, joints in PASSIVE_GROUPS.items() if jname in joints)
-        (axis,) = axes
-        k = float(getattr(params.passive, group).stiffness[axis])
-        kp = float(getattr(params.pid, PID_GROUP_OF[group]).kp[axis])
-        order.append(joint)
-        stiffness[joint.name()] = k + kp
-        kp_part[jname, axis] = kp
-    spine = plant.GetJointByName("spinal_compression", human)
-    order.append(spine)
-    stiffness[spine.name()] = float(params.passive.spine_axial_stiffness)
-    for joint in order:
-        if stiffness[joint.name()] > 0:
+    joints' (also implicit)."""
+    joints = [(joint, float(_joint_gains(params, jname, axes)[1][0]))
+              for jname, joint, axes in _each_joint(plant, human)]
+    joints.append((plant.GetJointByName("spinal_compression", human),
+                   float(params.passive.spine_axial_stiffness)))
+    for joint, stiffness in joints:
+        if stiffness > 0:
             actuator = plant.AddJointActuator(f"{joint.name()}_pd", joint)
-            actuator.set_controller_gains(PdControllerGains(p=stiffness[joint.name()], d=0.0))
-
-    def in_layout(layout: JointLayout):
-        kp = np.array([kp_part[dof] for dof in zip(layout.joints, layout.axes, strict=True)])
-        k = passive_stiffness_vector(params, layout)
-        return np.append(k[:-1] + kp, k[-1]), kp
-
-    return in_layout
+            actuator.set_controller_gains(PdControllerGains(p=stiffness, d=0.0))
 
 
 def set_joint_damping(hp: HumanPlant, plant_context, params: ModelParams) -> None:
     """Write the joint damping (passive + PID derivative gain) of `params`
     into `plant_context`."""
-    for jname, joint, axes in _each_joint(hp.plant, hp.human):
-        joint.SetDampingVector(plant_context, _joint_damping(params, jname, axes))
-    hp.plant.GetJointByName("spinal_compression", hp.human).SetDampingVector(
-        plant_context, [float(step_damping(params, params.passive.spine_axial_damping,
-                                           params.passive.spine_axial_stiffness))]
-    )
+    for joint, damping in _joint_damping_vectors(hp.plant, hp.human, params):
+        joint.SetDampingVector(plant_context, damping)
 
 
 def _connect_pd_targets(builder: DiagramBuilder, plant, human) -> None:

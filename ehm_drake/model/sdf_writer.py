@@ -16,6 +16,7 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
+from ..params import CARDAN_JOINTS
 from .anthropometry import REFERENCE, Body, build_body
 
 HUMAN_MODEL_NAME = "ehm_human"
@@ -371,11 +372,8 @@ def write_reference_sdf(directory: Path = SDF_DIR) -> list[Path]:
     """Regenerate the 50th-percentile SDF files in `directory`."""
     body = build_body(REFERENCE)
     paths = []
-    from ..params import PASSIVE_GROUPS
-
-    cardan = [j for joints in PASSIVE_GROUPS.values() for j in joints]
     for fname, text in ((HUMAN_SDF_NAME, human_sdf(body)),
-                        (HUMAN_CARDAN_SDF_NAME, human_sdf(body, cardan)),
+                        (HUMAN_CARDAN_SDF_NAME, human_sdf(body, CARDAN_JOINTS)),
                         (SEAT_SDF_NAME, seat_sdf(body))):
         path = Path(directory) / fname
         path.write_text(text)

@@ -89,7 +89,7 @@ def PassiveJoints_(T):
 
         `implicit` (same layout as the stiffness; implicit design): the
         stiffness about position 0 that the plant's PD actuators already
-        apply (`HumanPlant.implicit_stiffness`); the output is the springs'
+        apply (`HumanPlant.implicit_passive`); the output is the springs'
         force minus that, zero when the parameters are those the plant was
         built with.
         """
