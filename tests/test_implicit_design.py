@@ -135,3 +135,11 @@ def test_implicit_design_responds_like_the_reference_at_1_ms():
         c = CHANNEL_NAMES.index(channel)
         err = np.abs(T["imp"][:, c, axis] / T["ref"][:, c, axis] - 1.0)
         assert np.max(err) < tol, (channel, np.round(err, 3))
+
+
+def test_unknown_design_is_refused_by_name():
+    from ehm_drake.params import ParameterError, params_from_dict
+
+    with pytest.raises(ParameterError, match=r"simulation.design = 'fast'.*'implicit' or "
+                                             r"'reference'"):
+        params_from_dict({"simulation": {"design": "fast"}})
