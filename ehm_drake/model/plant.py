@@ -9,9 +9,12 @@ body-seat contact pairs, and finalizes the plant.
 Passive joints (paper Sec. II, "restraint cardan"): the torsional springs
 about each joint's Cardan angles and the axial spring of the spinal
 compression DoF are the vectorized `ehm_drake.systems.joints.PassiveJoints`
-system; the matching dampers are the joints' own damping, which the SAP
-solver integrates implicitly.  Both are context parameters, so
-identification changes them without rebuilding anything.  (Drake's
+system (its stiffness a context parameter); the matching dampers are the
+joints' own damping, set when the plant is built, which the SAP solver
+integrates implicitly.  Known defect of the reference design: Drake's
+BallRpyJoint and UniversalJoint apply the first entry of their damping
+vector to all their axes, so those joints are damped about every axis at
+their x value (README, "Two designs"; the fix is pending).  (Drake's
 `LinearBushingRollPitchYaw` is the equivalent force element, but profiling
 put it at 3.4 us per joint per step, a third of the step budget.)
 
@@ -422,7 +425,9 @@ def _each_joint(plant, human):
 
 
 def _joint_damping_vectors(plant, human, params: ModelParams):
-    """(Drake joint, its damping vector) of every joint of the human."""
+    """(Drake joint, its damping vector) of every joint of the human.  (A
+    ball or universal joint applies the vector's first entry to all its
+    axes: the reference design's known defect, see the module docstring.)"""
     for jname, joint, axes in _each_joint(plant, human):
         yield joint, _joint_damping(params, jname, axes)
     spine = params.passive
@@ -449,13 +454,6 @@ def _add_pd_actuators(plant, human, params: ModelParams) -> None:
         if stiffness > 0:
             actuator = plant.AddJointActuator(f"{joint.name()}_pd", joint)
             actuator.set_controller_gains(PdControllerGains(p=stiffness, d=0.0))
-
-
-def set_joint_damping(hp: HumanPlant, plant_context, params: ModelParams) -> None:
-    """Write the joint damping (passive + PID derivative gain) of `params`
-    into `plant_context`."""
-    for joint, damping in _joint_damping_vectors(hp.plant, hp.human, params):
-        joint.SetDampingVector(plant_context, damping)
 
 
 def _connect_pd_targets(builder: DiagramBuilder, plant, human) -> None:
