@@ -320,13 +320,8 @@ def cmd_modes(args) -> int:
 def cmd_fit(args) -> int:
     from .analysis.formats import read_data_dir
     from .analysis.transmissibility import transmissibility
-    from .identification.fit import (
-        fit,
-        load_weights,
-        safe_parameters,
-        verify_time_domain,
-        write_outputs,
-    )
+    from .identification.fit import fit, load_weights, write_outputs
+    from .identification.verify import safe_parameters, verify_time_domain
     from .params import save_params
 
     frf, ts = read_data_dir(args.data)

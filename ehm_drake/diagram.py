@@ -171,7 +171,7 @@ def build_diagram(
     k = passive_stiffness_vector(params, layout)
     passive = builder.AddNamedSystem(
         "passive_joints",
-        PassiveJoints(layout, k, np.zeros(len(k)), hp.implicit_passive))
+        PassiveJoints(layout, k, np.zeros(len(k)), hp.implicit_passive, hp.damping_remainder))
     gains = pid_vectors(params, layout)
     pid = builder.AddNamedSystem(
         "joint_pid",

@@ -22,6 +22,8 @@ from ehm_drake.model.plant import (
 from ehm_drake.params import load_params, reference_design
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import settle, static_equilibrium, vibrate
+from ehm_drake.systems.joints import _BallIndex, cardan_rates, rpy_rate_matrices
+from ehm_drake.systems.outputs import CHANNEL_NAMES
 
 
 def implicit(h: float = 0.001):
@@ -118,23 +120,95 @@ def test_posture_is_held_at_a_5_ms_step():
     assert np.max(np.abs(np.degrees(result.joint_torques))) > 0  # it moved
 
 
-@pytest.mark.slow
-def test_implicit_design_responds_like_the_reference_at_1_ms():
-    """Linearized at the same 1 ms step, the two designs give the same
-    vertical (seat to pelvis and head) and lateral (head) transmissibility
-    within a few percent over 1-10 Hz."""
+def _parameter_damping(params, layout):
+    """Passive damping + PID derivative gain per rotational DoF: the
+    parameter file's joint damping about each Cardan axis."""
+    from ehm_drake.model.plant import PID_GROUP_OF
+    return np.array([getattr(params.passive, g).damping[a]
+                     + getattr(params.pid, PID_GROUP_OF[g]).kd[a]
+                     for g, a in zip(layout.groups, layout.axes, strict=True)])
+
+
+@pytest.mark.parametrize("design", ["reference", "implicit"])
+def test_every_axis_gets_its_own_damping(design):
+    """Drake's ball and universal joints apply their first damping entry to
+    every axis; so the plant gives them their smallest axis damping, and
+    `PassiveJoints` the rest, about the Cardan rates.  Near the reference
+    posture the damping on each DoF is then the parameter file's."""
+    params = load_params()
+    params.simulation.design = design
+    model = build_diagram(params, guard=False, seat_forces=False)
+    hp, L = model.hp, model.hp.layout
+    ctx = model.diagram.CreateDefaultContext()
+    pc = model.plant_context(ctx)
+    joint_damping = np.zeros(model.plant.num_velocities())
+    for j in model.plant.GetJointIndices(hp.human):
+        joint = model.plant.get_joint(j)
+        d = joint.GetDampingVector(pc)
+        if joint.num_velocities() > 1:  # one value for all axes
+            assert np.ptp(d) == 0.0, joint.name()
+        joint_damping[joint.velocity_start():joint.velocity_start() + len(d)] = d
+    expected = _parameter_damping(params, L)
+    if design == "reference":
+        assert np.count_nonzero(hp.damping_remainder) >= 12  # spine, hips, neck
+    else:
+        assert not np.any(hp.damping_remainder)  # revolute chains carry their own
+        expected = step_damping(params, expected,
+                                hp.implicit_passive[:-1] + hp.implicit_kp)
+    # The damping force of PassiveJoints at the reference posture, for a
+    # velocity of 1 rad/s on every rotational DoF.
+    v = model.plant.GetVelocities(pc)
+    v[:] = 0.0
+    v[L.rot_v] = 1.0
+    model.plant.SetVelocities(pc, v)
+    s = model.systems["passive_joints"]
+    f = s.GetOutputPort("generalized_force").Eval(s.GetMyContextFromRoot(ctx))
+    np.testing.assert_allclose(joint_damping[L.rot_v] - f[L.rot_v], expected, rtol=1e-12)
+
+
+def test_cardan_rates_are_the_rpy_rate_mapping():
+    params = reference_design(load_params())
+    hp, _ = _plant(params)
+    L = hp.layout
+    rng = np.random.default_rng(7)
+    q = rng.uniform(-0.6, 0.6, L.num_rotational)
+    w = rng.normal(size=L.num_rotational)
+    rates = cardan_rates(_BallIndex(L), q, w)
+    b = L.ball_triplets
+    assert len(b) >= 3
+    expected = w.copy()
+    expected[b] = np.einsum("nij,nj->ni", rpy_rate_matrices(q[b]), w[b])
+    np.testing.assert_allclose(rates, expected, rtol=1e-13, atol=1e-13)
+
+
+def _transmissibility(params, freqs):
+    model = build_diagram(params, guard=False, seat_forces=False)
+    ctx, _ = static_equilibrium(model)
+    return np.abs(linearize(model, ctx, method="fd").transmissibility_array(freqs))
+
+
+def test_designs_are_the_same_model():
+    """Linearized at a 0.25 ms step (where both have converged in the step),
+    the two designs give the same transmissibility: within 1.5% median over
+    every channel that responds to x, y or z, and within 2% on the
+    fore-aft and vertical channels the ball joints' per-axis damping
+    decides (head x and pitch, trunk and pelvis pitch, pelvis and head z).
+    A channel responds at a frequency where its gain is at least a tenth of
+    its peak.  (With Drake's one damping value per ball joint, the median
+    was 9%, and head pitch under x differed by up to 45%.)"""
     freqs = np.linspace(1.0, 10.0, 19)
-    T = {}
-    for name, params in (("ref", reference_design(load_params())), ("imp", implicit())):
-        model = build_diagram(params, guard=False, seat_forces=False)
-        ctx, _ = static_equilibrium(model)
-        T[name] = np.abs(linearize(model, ctx, method="fd").transmissibility_array(freqs))
-    from ehm_drake.systems.outputs import CHANNEL_NAMES
-    for channel, axis, tol in (("pelvis_z", 2, 0.03), ("head_z", 2, 0.04),
-                               ("head_y", 1, 0.06), ("trunk_roll", 1, 0.06)):
+    reference = reference_design(load_params())
+    reference.simulation.time_step_s = 0.00025
+    T = {name: _transmissibility(params, freqs) for name, params in
+         (("ref", reference), ("imp", implicit(0.00025)))}
+    ratio = T["imp"] / T["ref"] - 1.0
+    responds = T["ref"] >= 0.1 * T["ref"].max(axis=0, keepdims=True)
+    assert np.median(np.abs(ratio[responds])) < 0.015
+    for channel, axis in (("head_x", 0), ("head_pitch", 0), ("trunk_pitch", 0),
+                          ("pelvis_pitch", 0), ("pelvis_z", 2), ("head_z", 2)):
         c = CHANNEL_NAMES.index(channel)
-        err = np.abs(T["imp"][:, c, axis] / T["ref"][:, c, axis] - 1.0)
-        assert np.max(err) < tol, (channel, np.round(err, 3))
+        err = np.abs(ratio[responds[:, c, axis], c, axis])
+        assert np.max(err) < 0.02, (channel, np.round(err, 3))
 
 
 def test_unknown_design_is_refused_by_name():

@@ -21,12 +21,20 @@ millimetres as contact stiffnesses change, a second-order effect on the
 FRF; the final parameters are re-linearized at their own equilibrium and
 verified in the nonlinear time domain).  The optimizer is scipy's bounded
 trust-region least squares on log(scale) of each free parameter, with the
-finite-difference Jacobian evaluated in parallel worker processes.
+finite-difference Jacobian evaluated in parallel worker processes, run from
+two starts (`STARTS`: gain and phase at once, and the gains first), the
+lower cost kept.
 
 Identifiability
 ---------------
-From the Jacobian J (in log-scale) at the solution: covariance
-s^2 (J^T J)^+ with s^2 the residual variance.  A parameter is reported as
+From the Jacobian J (in log-scale) at the solution, each column evaluated
+at its parameters' own static equilibrium (as the reported model is):
+covariance s^2 (J^T J)^+ with s^2 the residual variance.  (The optimizer's
+Jacobian holds the equilibrium fixed; the equilibrium, the PID's integral
+state included, moves with the stiffnesses, and along the lumbar-hip
+stiffness valley that fixed-equilibrium Jacobian put the hip stiffness'
+standard error at 3.3% where its own-equilibrium one is 5.4%, with the fit
+19% from the truth.)  A parameter is reported as
 determined by the data when its relative standard error is at most
 `ident_threshold` (default 3.3%: within 10% at three standard errors), it
 is not on a bound, and it correlates with no other free parameter at
@@ -65,6 +73,15 @@ from .parameters import (
 DEFAULT_SEGMENT_WEIGHTS = {"head": 1.0, "trunk": 1.0, "pelvis": 0.5, "knee_l": 0.3, "knee_r": 0.3}
 COHERENCE_CAP = 0.99
 UNSTABLE_PENALTY = 30.0
+#: The fit's starts (`fit(starts=...)`), each a staged descent from the
+#: start parameters; the lower cost at its own equilibrium is kept.  "plain"
+#: fits gain and phase at once; "gain first" fits the log gains alone, then
+#: gain and phase from there (wrapped phase errors make valleys the gains
+#: alone do not have).  On the 20-parameter recovery test each alone lands
+#: in a local minimum on some data: plain, with z held out, at 4.7x the
+#: truth's cost (thigh contact x7.6, held-out error 0.46 against 0.18 at
+#: the start); gain first, on all three directions, at 3x.
+STARTS = ("plain", "gain first")
 
 
 class FitError(RuntimeError):
@@ -272,13 +289,18 @@ def _init_worker(evaluator: Evaluator, residuals: Residuals) -> None:
 
 
 def _worker_residual(task) -> np.ndarray:
+    """(log scales, the state to linearize about, or None for the
+    parameters' own static equilibrium) -> residual."""
     log_scales, x_ref = task
+    if x_ref is None:
+        return _residual(_WORKER["ev"], _WORKER["res"], log_scales, at_equilibrium=True)
     _WORKER["ev"].x_ref = x_ref
     return _residual(_WORKER["ev"], _WORKER["res"], log_scales)
 
 
-def _residual(ev: Evaluator, res: Residuals, log_scales) -> np.ndarray:
-    T, stable = ev.transmissibility(log_scales)
+def _residual(ev: Evaluator, res: Residuals, log_scales, at_equilibrium: bool = False
+              ) -> np.ndarray:
+    T, stable = ev.transmissibility(log_scales, at_equilibrium)
     r = res(T)
     if not stable:  # keep the optimizer in the stable region
         r = r + UNSTABLE_PENALTY * np.sign(r + 1e-300) * np.abs(res.w_gain).max()
@@ -375,11 +397,18 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         weights: dict | None = None, holdout: str | None = None,
         measures: BodyMeasures = REFERENCE, variant: str = "default", workers: int = 2,
         progress: bool = True, max_evaluations: int = 400, ident_threshold: float = 0.033,
-        phase_weight: float = 0.5, stages: int | str = "auto") -> FitResult:
-    """Identify the free parameters from measured transmissibility `frf`."""
+        phase_weight: float = 0.5, stages: int | str = "auto",
+        starts: tuple[str, ...] = STARTS) -> FitResult:
+    """Identify the free parameters from measured transmissibility `frf`.
+
+    `starts`: the descents to make, of `STARTS` (each costs about one fit);
+    the lower cost is kept and the report lists each one's."""
     from ..params import load_params
 
     start = start or load_params()
+    unknown = [s_ for s_ in starts if s_ not in STARTS]
+    if not starts or unknown:
+        raise FitError(f"starts {list(starts)}: choose one or more of {list(STARTS)}")
     free_params = resolve_free(free) if not isinstance(free, list) else free
     warnings = check_fit_data(frf)
     train, held = split_holdout(frf, holdout)
@@ -419,43 +448,91 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
     # the weakest columns were noise and their standard errors too small).
     step = 0.03
 
-    def jac(x):
-        f0 = fun(x)
+    def columns(x, x_ref):
+        """Finite-difference steps of each log scale and their residuals
+        (about `x_ref`, or at each one's own equilibrium if None)."""
         xs = [x + step * np.eye(len(x))[j] * (1 if x[j] + step <= hi[j] else -1)
               for j in range(len(x))]
+        tasks = [(xj, x_ref) for xj in xs]
         if pool is not None:
-            cols = list(pool.map(_worker_residual, [(xj, ev.x_ref) for xj in xs]))
+            cols = list(pool.map(_worker_residual, tasks))
         else:
-            cols = [_residual(ev, res, xj) for xj in xs]
+            cols = [_residual(ev, res, xj, at_equilibrium=x_ref is None) for xj in xs]
         tracker.n += len(xs)
+        return xs, cols
+
+    def jac(x, f0=None, x_ref=False):
+        f0 = fun(x) if f0 is None else f0
+        xs, cols = columns(x, ev.x_ref if x_ref is False else x_ref)
         return np.column_stack([(c - f0) / (xj - x).sum() for c, xj in zip(cols, xs,
                                                                            strict=True)])
 
-    t_start = time.perf_counter()
-    interrupted = False
-    x_best, J = x0, None
-    try:
-        # Stage 1 linearizes about the starting parameters' equilibrium;
-        # stage 2 about the stage-1 parameters' own equilibrium (contact
-        # stiffness moves it by millimetres), removing that bias.
-        n_stages = 2 if stages == "auto" else int(stages)
+    x_ref0 = ev.x_ref
+    n_stages = 2 if stages == "auto" else int(stages)
+    nfev = max(10, max_evaluations // (len(x0) + 1))
+    options = dict(bounds=(lo, hi), method="trf", x_scale=1.0, ftol=1e-3, xtol=1e-3,
+                   gtol=1e-8, max_nfev=nfev)
+
+    # The gain rows of the residual (the phase rows follow them).
+    gain_rows = np.arange(res.size) < res.size // 2
+
+    def descend(x_start, phase: bool = True):
+        """The staged fit from `x_start`: stage 1 linearizes about the
+        starting parameters' equilibrium; stage 2 about the stage-1
+        parameters' own equilibrium (contact stiffness moves it by
+        millimetres), removing that bias.  Without `phase`, the gain rows
+        alone are fitted."""
+        def f(x):
+            return fun(x) if phase else fun(x) * gain_rows
+
+        def jf(x):
+            return jac(x) if phase else jac(x) * gain_rows[:, None]
+
+        x_best = x_start
         for stage in range(n_stages):
             if stage > 0:
                 x_eq = ev.equilibrium(x_best)
                 if stages == "auto" and np.max(np.abs(x_eq - ev.x_ref)) < 2e-4:
                     break  # the equilibrium barely moved: no bias to remove
                 ev.x_ref = x_eq
-                cache.clear()
-                tracker.best_cost, tracker.best_x = 0.5 * float(fun(x_best) @ fun(x_best)), x_best
-            sol = least_squares(fun, x_best, jac=jac, bounds=(lo, hi), method="trf",
-                                x_scale=1.0, ftol=1e-3, xtol=1e-3, gtol=1e-8,
-                                max_nfev=max(10, max_evaluations // (len(x0) + 1)))
-            x_best = sol.x if 0.5 * float(sol.fun @ sol.fun) <= tracker.best_cost \
+            cache.clear()
+            tracker.best_cost = 0.5 * float(fun(x_best) @ fun(x_best))
+            tracker.best_x = x_best
+            sol = least_squares(f, x_best, jac=jf, **options)
+            x_best = sol.x if not phase or 0.5 * float(sol.fun @ sol.fun) <= tracker.best_cost \
                 else tracker.best_x
-            J = sol.jac
-    except KeyboardInterrupt:
-        interrupted = True
-        x_best = tracker.best_x
+        return x_best
+
+    def own_cost(x):
+        r = res(ev.transmissibility(x, at_equilibrium=True)[0])
+        return 0.5 * float(r @ r)
+
+    def from_start(name):
+        ev.x_ref = x_ref0
+        return descend(x0) if name == "plain" else descend(descend(x0, phase=False))
+
+    t_start = time.perf_counter()
+    interrupted = False
+    x_best, J = x0, None
+    ends = []  # (log scales, start, cost at its own equilibrium)
+    try:
+        try:
+            for name in starts:
+                x_end = from_start(name)
+                ends.append((x_end, name, own_cost(x_end)))
+            x_best = min(ends, key=lambda e: e[2])[0]
+        except KeyboardInterrupt:
+            interrupted = True
+            x_best = min(ends, key=lambda e: e[2])[0] if ends else tracker.best_x
+        # Final model at its own equilibrium, and the Jacobian there (for
+        # the standard errors; see the module docstring).
+        T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
+        r_fit = res(T_fit)
+        if not interrupted:
+            try:
+                J = jac(x_best, r_fit, x_ref=None)
+            except KeyboardInterrupt:
+                interrupted = True
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
@@ -463,15 +540,14 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
     tracker.progress.close()
     if J is None:
         J = np.full((res.size, len(x0)), np.nan)
-    # Final model at its own equilibrium.
-    T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
-    r_fit = res(T_fit)
     report = _report(free_params, start, ev, x_best, bounds, J, r_fit, r0, res, T0, T_fit,
                      held_res, stable, stable0, ident_threshold)
     report.update({"warnings": warnings, "holdout": holdout, "interrupted": interrupted,
                    "fit_wall_s": t_fit, "n_model_evaluations": tracker.n,
                    "free": [fp.name for fp in free_params], "variant": variant,
-                   "data_rows_used": len(res.row_f)})
+                   "data_rows_used": len(res.row_f),
+                   "starts": [{"start": name, "cost": cost, "scales": np.exp(x).tolist()}
+                              for x, name, cost in ends]})
     return FitResult(ev.params(x_best), start, free_params, np.exp(x_best), report, T0, T_fit,
                      freqs, directions, interrupted)
 
@@ -536,89 +612,6 @@ def _report(free, start, ev, x, bounds, J, r_fit, r0, res, T0, T_fit, held_res, 
         out["heldout_cost"] = 0.5 * float(np.sum(held_res(T_fit) ** 2))
         out["train_error"] = out["gain_error_after"]
     return out
-
-
-# ---------------------------------------------------------------------------
-# Time-domain verification
-# ---------------------------------------------------------------------------
-
-
-def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
-                       measures: BodyMeasures = REFERENCE, variant: str = "default",
-                       duration: float = 60.0, seed: int = 1, timeseries=None,
-                       progress: bool = False) -> dict:
-    """Simulate the measured excitation with `params` (nonlinear, time
-    domain), estimate the transmissibility as a lab would, and compare it
-    with the data.  The excitation is the recorded seat acceleration when
-    `timeseries` is given, else random 0.1-12 Hz per measured direction at
-    the measured level.  Fails on divergence, lost posture or instability."""
-    from ..analysis.transmissibility import transmissibility
-    from ..signals import make_seat_signal, signal_from_samples
-    from ..simulation import EquilibriumError, SimulationDiverged, settle, vibrate
-
-    out: dict = {"passed": True, "directions": {}}
-    try:
-        settled = settle(params, measures, variant)
-    except (SimulationDiverged, EquilibriumError) as e:
-        return {"passed": False, "reason": f"settling failed: {e}"}
-    posture = settled.summary
-    out["posture"] = {"max_joint_error_deg": posture["max_joint_error_deg"],
-                      "back_in_contact": posture["back_in_contact"]}
-    if posture["max_joint_error_deg"] > 0.5 or not posture["back_in_contact"]:
-        out["passed"] = False
-        out["reason"] = "posture lost after settling"
-    s = params.simulation
-    if timeseries is not None:
-        runs = {timeseries.meta.get("direction") or "recorded": signal_from_samples(
-            timeseries.t, timeseries.seat_acc, s.time_step_s, s.settle_time_s, 0.5)}
-    else:
-        runs = {}
-        for d in directions:
-            levels = frf.select(direction=d).level_rms
-            level = float(np.nanmedian(levels)) if np.isfinite(levels).any() else 0.1941
-            runs[d] = make_seat_signal("random", d, level, duration, seed, s.time_step_s,
-                                       s.settle_time_s, s.onset_time_s)
-    for label, sig in runs.items():
-        try:
-            run = vibrate(params, settled, sig, measures, variant, progress=progress)
-        except SimulationDiverged as e:
-            out["passed"] = False
-            out["reason"] = str(e)
-            out["directions"][label] = {"diverged": str(e)}
-            continue
-        est = transmissibility(run.after(sig.steady_start).to_timeseries())
-        errs = {}
-        for key in est.channels():
-            d, seg, dof = key[:3]
-            f, g, _, coh = frf.get(d, seg, dof) if len(frf.select(d, seg, dof)) else ([],) * 4
-            if len(f) == 0:
-                continue
-            ef, eg, _, ecoh = est.get(d, seg, dof)
-            gi = np.interp(f, ef, eg)
-            ok = (coh > 0.5) & (np.interp(f, ef, ecoh) > 0.5) & (g > 0) & (gi > 0)
-            if ok.sum() > 3:
-                errs[f"{d}/{seg}/{dof}"] = float(np.sqrt(np.mean(np.log(gi[ok] / g[ok]) ** 2)))
-        out["directions"][label] = {
-            "excitation": sig.description, "rms_log_gain_error": float(np.mean(list(
-                errs.values()))) if errs else None, "per_channel": errs,
-            "real_time_factor": run.meta["real_time_factor"]}
-    return out
-
-
-def safe_parameters(result: FitResult, frf: FrfData, verify, **kw):
-    """The fitted parameters if they pass `verify`, else the largest step
-    back towards the start (log-scale fractions 0.5, 0.25) that passes, else
-    the start.  Returns (params, fraction, verification)."""
-    from .parameters import apply_scales
-
-    x = np.log(result.scales)
-    last = None
-    for frac in (1.0, 0.5, 0.25, 0.0):
-        params = apply_scales(result.start, result.free, np.exp(frac * x))
-        last = verify(params, frf, result.directions, **kw)
-        if last["passed"]:
-            return params, frac, last
-    return result.start, 0.0, last
 
 
 # ---------------------------------------------------------------------------

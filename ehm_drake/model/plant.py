@@ -11,10 +11,12 @@ about each joint's Cardan angles and the axial spring of the spinal
 compression DoF are the vectorized `ehm_drake.systems.joints.PassiveJoints`
 system (its stiffness a context parameter); the matching dampers are the
 joints' own damping, set when the plant is built, which the SAP solver
-integrates implicitly.  Known defect of the reference design: Drake's
-BallRpyJoint and UniversalJoint apply the first entry of their damping
-vector to all their axes, so those joints are damped about every axis at
-their x value (README, "Two designs"; the fix is pending).  (Drake's
+integrates implicitly.  Drake's BallRpyJoint and UniversalJoint apply the
+first entry of their damping vector to all their axes (checked on Drake
+1.51: a ball joint given (100, 1, 1) damps all three velocities at 100), so
+a multi-DoF joint gets its smallest axis damping on every axis (implicit)
+and `PassiveJoints` applies the rest about the Cardan rates
+(`HumanPlant.damping_remainder`; README, "Two designs").  (Drake's
 `LinearBushingRollPitchYaw` is the equivalent force element, but profiling
 put it at 3.4 us per joint per step, a third of the step budget.)
 
@@ -201,6 +203,12 @@ class HumanPlant:
     #: only what differs from it.
     implicit_passive: np.ndarray | None = None
     implicit_kp: np.ndarray | None = None
+    #: Joint damping per rotational DoF of `layout` (N m s/rad) that the
+    #: plant's joints do not apply: on a ball or universal joint, each axis'
+    #: damping less the joint's smallest, which the joint applies to every
+    #: axis (see `_joint_damping_vectors`); applied by `PassiveJoints` about
+    #: the Cardan rates.  Zeros on the Cardan chains.
+    damping_remainder: np.ndarray | None = None
     effects: dict = field(default_factory=dict)
     #: The resolved extensions of `effects`, in registration order.
     extensions: tuple[ModelExtension, ...] = ()
@@ -297,6 +305,7 @@ def add_seated_human(
         design=design,
         implicit_passive=implicit_k,
         implicit_kp=implicit_kp,
+        damping_remainder=damping_remainder(plant, human, params, layout),
         effects=effects,
         extensions=extensions,
     )
@@ -425,19 +434,43 @@ def _each_joint(plant, human):
 
 
 def _joint_damping_vectors(plant, human, params: ModelParams):
-    """(Drake joint, its damping vector) of every joint of the human.  (A
-    ball or universal joint applies the vector's first entry to all its
-    axes: the reference design's known defect, see the module docstring.)"""
+    """(Drake joint, its damping vector, the remainder per axis) of every
+    joint of the human.
+
+    Drake's BallRpyJoint and UniversalJoint apply the vector's first entry
+    to all their axes, and SAP integrates that implicitly; so such a joint
+    gets its smallest axis damping on every axis, and the remainder (each
+    axis' damping less that) is left to `PassiveJoints`.  A revolute joint
+    (the Cardan chains) carries its own damping; its remainder is 0."""
     for jname, joint, axes in _each_joint(plant, human):
-        yield joint, _joint_damping(params, jname, axes)
+        damping = _joint_damping(params, jname, axes)
+        if len(axes) > 1:
+            floor = float(np.min(damping))
+            yield joint, np.full(len(axes), floor), damping - floor
+        else:
+            yield joint, damping, np.zeros(1)
     spine = params.passive
     yield (plant.GetJointByName("spinal_compression", human),
-           [float(step_damping(params, spine.spine_axial_damping, spine.spine_axial_stiffness))])
+           [float(step_damping(params, spine.spine_axial_damping, spine.spine_axial_stiffness))],
+           np.zeros(1))
 
 
 def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
-    for joint, damping in _joint_damping_vectors(plant, human, params):
+    for joint, damping, _ in _joint_damping_vectors(plant, human, params):
         joint.set_default_damping_vector(damping)
+
+
+def damping_remainder(plant, human, params: ModelParams, layout: JointLayout) -> np.ndarray:
+    """Per rotational DoF of `layout`, the joint damping the Drake joint does
+    not apply (see `_joint_damping_vectors`), N m s/rad."""
+    out = np.zeros(layout.num_rotational)
+    where = {v: i for i, v in enumerate(layout.rot_v)}
+    for joint, _, rest in _joint_damping_vectors(plant, human, params):
+        for i, r in enumerate(rest):
+            index = where.get(joint.velocity_start() + i)
+            if index is not None:
+                out[index] = r
+    return out
 
 
 def _add_pd_actuators(plant, human, params: ModelParams) -> None:

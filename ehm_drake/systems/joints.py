@@ -9,7 +9,9 @@ torsional springs on the joint's roll-pitch-yaw (Cardan) angles.  For a
 the angle rates, so a Cardan torque tau maps to the generalized force
 f = N(q)^T tau, where N(q) maps w_FM_F to the angle rates; this keeps the
 springs conservative at any angle.  Their dampers are the plant's joint
-damping (implicit in SAP).
+damping (implicit in SAP), except what a ball or universal joint cannot
+carry (Drake applies its first damping entry to every axis): that remainder
+acts here about the Cardan rates, rpy_dot = N(q) w, mapped back by N^T.
 
 The PID acts on the generalized coordinates: the joint angles q (error
 against the reference posture) and the joint velocities v, and returns
@@ -76,6 +78,21 @@ def cardan_to_generalized(ball: _BallIndex, q_rot, tau):
     return f
 
 
+def cardan_rates(ball: _BallIndex, q_rot, v_rot):
+    """The Cardan angle rates of the rotational DoFs: N(q) w on the ball
+    joints (whose generalized velocities are w_FM_F), v elsewhere."""
+    p = q_rot[ball.pitch]
+    y = q_rot[ball.yaw]
+    cp, cy, sy = np.cos(p), np.cos(y), np.sin(y)
+    wx, wy = v_rot[ball.roll], v_rot[ball.pitch]
+    u = (cy * wx + sy * wy) / cp  # common factor of the roll and yaw rates
+    rates = v_rot.copy()
+    rates[ball.roll] = u
+    rates[ball.pitch] = cy * wy - sy * wx
+    rates[ball.yaw] = v_rot[ball.yaw] + u * np.sin(p)
+    return rates
+
+
 @TemplateSystem.define("PassiveJoints_", T_list=SCALARS)
 def PassiveJoints_(T):
     class Impl(LeafSystem_[T]):
@@ -92,14 +109,22 @@ def PassiveJoints_(T):
         apply (`HumanPlant.implicit_passive`); the output is the springs'
         force minus that, zero when the parameters are those the plant was
         built with.
+
+        `damping_remainder` (one value per rotational DoF, N m s/rad): the
+        joint damping the plant's ball and universal joints do not apply
+        (`HumanPlant.damping_remainder`), applied here as -c rpy_dot about
+        the Cardan rates.
         """
 
         def _construct(self, layout: JointLayout, stiffness, neutral, implicit=None,
-                       converter=None):
+                       damping_remainder=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._layout = layout
             self._implicit = None if implicit is None or not np.any(implicit) \
                 else np.asarray(implicit, float)
+            self._damping = None if damping_remainder is None or not np.any(damping_remainder) \
+                else np.asarray(damping_remainder, float)
+            assert self._damping is None or self._damping.shape == (layout.num_rotational,)
             self._ball = _BallIndex(layout)
             n = layout.num_rotational + 1
             stiffness = np.asarray(stiffness, float)
@@ -115,7 +140,7 @@ def PassiveJoints_(T):
         def _construct_copy(self, other, converter=None):
             n = len(other._init) // 2
             Impl._construct(self, other._layout, other._init[:n], other._init[n:],
-                            other._implicit, converter=converter)
+                            other._implicit, other._damping, converter=converter)
 
         @property
         def parameter_index(self):
@@ -129,6 +154,10 @@ def PassiveJoints_(T):
             tau = -kq0[:n] * (q - kq0[n:])
             if self._implicit is not None:
                 tau = tau + self._implicit * q
+            if self._damping is not None:
+                m = len(self._layout.rot_v)
+                rates = cardan_rates(self._ball, q[:m], x[self._layout.nq + self._layout.rot_v])
+                tau[:m] = tau[:m] - self._damping * rates
             f = np.zeros(self._layout.nv, dtype=tau.dtype)
             f[self._v_index] = cardan_to_generalized(self._ball, q, tau)
             output.SetFromVector(f)
