@@ -3,7 +3,7 @@ system, of the whole discrete update (plant contact solve + controllers)
 and of the logged outputs (the plant's own step alone: the ceiling line of
 `bench_simulate.py`).
 
-    python bench/bench_step_parts.py
+    python bench/bench_step_parts.py [time_step_s [design]]
 
 Each figure is the best of five repeats of 400 evaluations at the settled
 state, the state nudged before every evaluation so no cached value is
@@ -33,6 +33,8 @@ def main() -> None:
     params = load_params()
     if len(sys.argv) > 1:
         params.simulation.time_step_s = float(sys.argv[1])
+    if len(sys.argv) > 2:
+        params.simulation.design = sys.argv[2]
     settled = settle(params)
     model = build_diagram(params)
     ctx = model.diagram.CreateDefaultContext()
