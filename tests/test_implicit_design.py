@@ -6,6 +6,8 @@ and respond like it, so that its step can be chosen by accuracy."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from pydrake.systems.framework import DiagramBuilder
@@ -107,6 +109,22 @@ def test_step_damping_removes_what_the_implicit_step_adds():
     spine = hp.plant.GetJointByName("spinal_compression", hp.human)
     assert spine.GetDampingVector(ctx)[0] == pytest.approx(
         p.passive.spine_axial_damping - 0.005 * p.passive.spine_axial_stiffness)
+
+
+def test_a_step_that_would_clip_a_damper_is_warned_about():
+    """Beyond h = c / k the implicit step alone damps more than the model;
+    the damper is then clipped at zero, and the build says which and the
+    largest step that keeps it."""
+    p = implicit(0.005)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _plant(p)  # the parameter file's dampers all allow 5 ms (the first clips at 11 ms)
+    p.passive.spine_axial_damping = 240.0  # c / k = 3 ms
+    with pytest.warns(UserWarning, match=r"spinal_compression \(3 ms\).*at most 0.003 s"):
+        hp, diagram = _plant(p)
+    spine = hp.plant.GetJointByName("spinal_compression", hp.human)
+    ctx = hp.plant.GetMyContextFromRoot(diagram.CreateDefaultContext())
+    assert spine.GetDampingVector(ctx)[0] == 0.0
 
 
 def test_posture_is_held_at_a_5_ms_step():

@@ -36,6 +36,7 @@ names none.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -280,6 +281,7 @@ def add_seated_human(
     _set_default_joint_damping(plant, human, params)
     if design == "implicit":
         _add_pd_actuators(plant, human, params)
+        _warn_if_step_damping_clips(params, step_damping_limits(plant, human, params))
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
     for ext in extensions:
         ext.add_plant_elements(plant, human, seat, body)
@@ -422,6 +424,37 @@ def step_damping(params: ModelParams, damping, stiffness):
         return damping
     return np.maximum(damping - params.simulation.time_step_s * np.asarray(stiffness, float),
                       0.0)
+
+
+def step_damping_limits(plant, human, params: ModelParams) -> dict[str, float]:
+    """Per damper of the implicit design, the largest time step (s) at which
+    `step_damping` need not clip, c / k: beyond it the implicit step alone
+    damps more than the model (joint DoFs `<joint>_<x|y|z>`, the spine's
+    axial DoF, the contact pairs)."""
+    limits = {}
+    for jname, _, axes in _each_joint(plant, human):
+        damping, stiffness = _joint_gains(params, jname, axes)
+        for axis, c, k in zip(axes, damping, stiffness, strict=True):
+            if k > 0:
+                limits[f"{jname}_{'xyz'[axis]}"] = c / k
+    spine = params.passive
+    limits["spinal_compression"] = spine.spine_axial_damping / spine.spine_axial_stiffness
+    for pair in CONTACT_PAIRS:
+        cp = getattr(params.contact, pair)
+        limits[f"contact {pair}"] = cp.damping / cp.stiffness
+    return limits
+
+
+def _warn_if_step_damping_clips(params: ModelParams, limits: dict[str, float]) -> None:
+    h = params.simulation.time_step_s
+    clipped = sorted((limit, name) for name, limit in limits.items() if limit < h)
+    if clipped:
+        names = ", ".join(f"{name} ({limit * 1e3:.3g} ms)" for limit, name in clipped)
+        warnings.warn(
+            f"simulation.time_step_s = {h:g} s: the implicit step adds more damping than the "
+            f"model has on {len(clipped)} damper(s), whose damping is then zero instead of "
+            f"c - h k: {names}; a step of at most {clipped[0][0]:.3g} s keeps every damper "
+            "as the parameter file gives it", stacklevel=3)
 
 
 def _each_joint(plant, human):
