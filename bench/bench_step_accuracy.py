@@ -82,12 +82,13 @@ def compare(frf, ref) -> tuple[float, float, str, int]:
     # rotations in deg/m) under that input.  This leaves out the cross-axis
     # channels of the symmetric body (y -> pelvis x, y -> head z), whose
     # bins pass the per-channel filter with gains near zero.
+    def kind(k):
+        return k[0], k[2] in ("x", "y", "z")
+
     largest = {}
-    for (d, _, o), g in peak.items():
-        kind = (d, o in ("x", "y", "z"))
-        largest[kind] = max(largest.get(kind, 0.0), g)
-    peak = {k: g if g >= CHANNEL_FLOOR * largest[(k[0], k[2] in ("x", "y", "z"))] else 0.0
-            for k, g in peak.items()}
+    for k, g in peak.items():
+        largest[kind(k)] = max(largest.get(kind(k), 0.0), g)
+    peak = {k: g if g >= CHANNEL_FLOOR * largest[kind(k)] else 0.0 for k, g in peak.items()}
     errs, labels = [], []
     for k, (g, c) in a.items():
         if k not in b or not (BAND_HZ[0] <= k[3] <= BAND_HZ[1]):

@@ -150,6 +150,8 @@ def test_unknown_start_is_refused(params):
     data = synthetic_frf(params, directions="z", seed=4)
     with pytest.raises(FitError, match="phase first"):
         fit(data, params, "neck_damping", workers=1, progress=False, starts=("random",))
+    with pytest.raises(FitError, match=r"starts \['random'\]"):  # one name, not its letters
+        fit(data, params, "neck_damping", workers=1, progress=False, starts="random")
 
 
 def test_phase_first_without_phase_rows_is_the_plain_descent(params):

@@ -407,11 +407,13 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         starts: tuple[str, ...] = STARTS) -> FitResult:
     """Identify the free parameters from measured transmissibility `frf`.
 
-    `starts`: the descents to make, of `STARTS` (each costs about one fit);
+    `starts`: the descents to make (a name or names of `STARTS` and
+    `OTHER_STARTS`; each costs about one fit);
     the lower cost is kept and the report lists each one's."""
     from ..params import load_params
 
     start = start or load_params()
+    starts = (starts,) if isinstance(starts, str) else tuple(starts)
     unknown = [s_ for s_ in starts if s_ not in STARTS + OTHER_STARTS]
     if not starts or unknown:
         raise FitError(f"starts {list(starts)}: choose one or more of "
@@ -455,22 +457,18 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
     # the weakest columns were noise and their standard errors too small).
     step = 0.03
 
-    def columns(x, x_ref):
-        """Finite-difference steps of each log scale and their residuals
-        (about `x_ref`, or at each one's own equilibrium if None)."""
+    def jac(x, f0=None, own_equilibrium: bool = False):
+        """Finite-difference Jacobian about the current linearization state
+        `ev.x_ref`, or each column at its parameters' own equilibrium."""
+        f0 = fun(x) if f0 is None else f0
         xs = [x + step * np.eye(len(x))[j] * (1 if x[j] + step <= hi[j] else -1)
               for j in range(len(x))]
-        tasks = [(xj, x_ref) for xj in xs]
+        x_ref = None if own_equilibrium else ev.x_ref
         if pool is not None:
-            cols = list(pool.map(_worker_residual, tasks))
+            cols = list(pool.map(_worker_residual, [(xj, x_ref) for xj in xs]))
         else:
-            cols = [_residual(ev, res, xj, at_equilibrium=x_ref is None) for xj in xs]
+            cols = [_residual(ev, res, xj, at_equilibrium=own_equilibrium) for xj in xs]
         tracker.n += len(xs)
-        return xs, cols
-
-    def jac(x, f0=None, x_ref=False):
-        f0 = fun(x) if f0 is None else f0
-        xs, cols = columns(x, ev.x_ref if x_ref is False else x_ref)
         return np.column_stack([(c - f0) / (xj - x).sum() for c, xj in zip(cols, xs,
                                                                            strict=True)])
 
@@ -513,9 +511,11 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
                 else tracker.best_x
         return x_best
 
-    def own_cost(x):
-        r = res(ev.transmissibility(x, at_equilibrium=True)[0])
-        return 0.5 * float(r @ r)
+    def at_own_equilibrium(x):
+        """(cost, T, stable) of the model at its own static equilibrium."""
+        T, stable = ev.transmissibility(x, at_equilibrium=True)
+        r = res(T)
+        return 0.5 * float(r @ r), T, stable
 
     def from_start(name):
         ev.x_ref = x_ref0
@@ -529,23 +529,25 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
     t_start = time.perf_counter()
     interrupted = False
     x_best, J = x0, None
-    ends = []  # (log scales, start, cost at its own equilibrium)
+    ends = []  # (log scales, start, (cost, T, stable) at its own equilibrium)
     try:
         try:
             for name in starts:
                 x_end = from_start(name)
-                ends.append((x_end, name, own_cost(x_end)))
-            x_best = min(ends, key=lambda e: e[2])[0]
+                ends.append((x_end, name, at_own_equilibrium(x_end)))
         except KeyboardInterrupt:
             interrupted = True
-            x_best = min(ends, key=lambda e: e[2])[0] if ends else tracker.best_x
-        # Final model at its own equilibrium, and the Jacobian there (for
+        # The final model at its own equilibrium, and the Jacobian there (for
         # the standard errors; see the module docstring).
-        T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
+        if ends:
+            x_best, _, (_, T_fit, stable) = min(ends, key=lambda e: e[2][0])
+        else:
+            x_best = tracker.best_x
+            T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
         r_fit = res(T_fit)
         if not interrupted:
             try:
-                J = jac(x_best, r_fit, x_ref=None)
+                J = jac(x_best, r_fit, own_equilibrium=True)
             except KeyboardInterrupt:
                 interrupted = True
     finally:
@@ -561,8 +563,8 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
                    "fit_wall_s": t_fit, "n_model_evaluations": tracker.n,
                    "free": [fp.name for fp in free_params], "variant": variant,
                    "data_rows_used": len(res.row_f),
-                   "starts": [{"start": name, "cost": cost, "scales": np.exp(x).tolist()}
-                              for x, name, cost in ends]})
+                   "starts": [{"start": name, "cost": own[0], "scales": np.exp(x).tolist()}
+                              for x, name, own in ends]})
     return FitResult(ev.params(x_best), start, free_params, np.exp(x_best), report, T0, T_fit,
                      freqs, directions, interrupted)
 
