@@ -57,6 +57,7 @@ from .systems.seat import (
     SEAT_PART_NAMES,
     SeatInertialLoad,
     ShearRestraints,
+    contact_explicit_damping,
     restraint_parameters,
     restraint_points,
 )
@@ -177,7 +178,7 @@ def build_diagram(
         "joint_pid",
         JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
                  np.zeros(layout.num_rotational), h, implicit_kp=hp.implicit_kp))
-    if pid.HasInputPort("plant_state"):  # implicit design: the plant applies kp
+    if pid.HasInputPort("plant_state"):  # the plant's PD actuators apply kp
         builder.Connect(state, pid.GetInputPort("plant_state"))
     # Seat: inertial load of the seat motion, shear restraints.
     inertial = builder.AddNamedSystem("seat_inertial_load",
@@ -186,7 +187,8 @@ def build_diagram(
     points = restraint_points(hp)
     restraints = builder.AddNamedSystem(
         "shear_restraints",
-        ShearRestraints(plant, points, _restraint_vector(params, points, extensions), h))
+        ShearRestraints(plant, points, _restraint_vector(params, points, extensions), h,
+                        hp.restraint_constraints, contact_explicit_damping(params, points)))
     # Head-in-space control.
     gain = 1.0 if params.his.enabled else 0.0
     his = builder.AddNamedSystem(

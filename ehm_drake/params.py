@@ -159,10 +159,11 @@ class Restraints:
 
 @dataclass
 class Simulation:
-    #: "implicit": Cardan joint chains whose stiff feedback (passive springs,
-    #: PID proportional and derivative parts) the plant's SAP solve
-    #: integrates implicitly, so the step is set by accuracy; "reference":
-    #: the paper's 1 ms design with spherical joints and explicit feedback
+    #: "implicit": Cardan joint chains, every spring at the step's start and
+    #: every damper half in the plant's SAP solve (implicit), half explicit,
+    #: so the step is second-order accurate and set by accuracy
+    #: (`ehm_drake.model.stepping`); "reference": the paper's 1 ms design
+    #: with spherical joints, explicit springs and implicit damping
     #: (`reference_design`).
     design: str
     time_step_s: float

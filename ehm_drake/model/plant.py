@@ -16,7 +16,11 @@ first entry of their damping vector to all their axes (checked on Drake
 1.51: a ball joint given (100, 1, 1) damps all three velocities at 100), so
 a multi-DoF joint gets its smallest axis damping on every axis (implicit)
 and `PassiveJoints` applies the rest about the Cardan rates
-(`HumanPlant.damping_remainder`; README, "Two designs").  (Drake's
+(`HumanPlant.damping_remainder`; README, "Two designs").  On the implicit
+design every damper is split between SAP and an explicit force so that the
+step is second-order accurate (`ehm_drake.model.stepping`), and the shear
+restraints' linear part is a set of compliant distance constraints
+(`ehm_drake.model.restraints`).  (Drake's
 `LinearBushingRollPitchYaw` is the equivalent force element, but profiling
 put it at 3.4 us per joint per step, a third of the step budget.)
 
@@ -72,6 +76,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 from ..params import CARDAN_JOINTS, CONTACT_PAIRS, PASSIVE_GROUPS, PID_GROUPS, ModelParams
 from .anthropometry import REFERENCE, Body, BodyMeasures, build_body
 from .extensions import ModelExtension, merge_options, resolve_extensions, validate_extensions
+from .restraints import RestraintConstraints, add_restraint_constraints
 from .sdf_writer import (
     HUMAN_CARDAN_SDF_NAME,
     HUMAN_SDF_NAME,
@@ -79,6 +84,15 @@ from .sdf_writer import (
     cardan_joint,
     human_sdf,
     seat_sdf,
+)
+from .stepping import (
+    SPINE_AXIAL,
+    STABLE_OMEGA_H,
+    central_limit,
+    implicit_springs,
+    segment_frequencies,
+    step_damping,
+    step_split,
 )
 
 PACKAGE_NAME = "ehm_drake"
@@ -195,8 +209,10 @@ class HumanPlant:
     #: "implicit" or "reference" (`params.Simulation.design`).
     design: str = "reference"
     #: The stiffness the plant's PD-controlled joint actuators apply, about
-    #: the zero (reference) position, integrated implicitly by SAP (implicit
-    #: design; zeros on the reference design), in two parts:
+    #: the zero (reference) position, integrated implicitly by SAP: on the
+    #: implicit design where the step is too large for the spring to be
+    #: explicit (`spring_is_implicit`), zeros elsewhere and on the reference
+    #: design; in two parts:
     #: `implicit_passive`, the passive Cardan spring per rotational DoF of
     #: `layout` (N m/rad) then the spine's axial spring (N/m), applied instead
     #: of `PassiveJoints`; `implicit_kp`, the PID's proportional gain per
@@ -204,12 +220,16 @@ class HumanPlant:
     #: only what differs from it.
     implicit_passive: np.ndarray | None = None
     implicit_kp: np.ndarray | None = None
-    #: Joint damping per rotational DoF of `layout` (N m s/rad) that the
-    #: plant's joints do not apply: on a ball or universal joint, each axis'
-    #: damping less the joint's smallest, which the joint applies to every
-    #: axis (see `_joint_damping_vectors`); applied by `PassiveJoints` about
-    #: the Cardan rates.  Zeros on the Cardan chains.
+    #: Joint damping per rotational DoF of `layout` (N m s/rad), then of the
+    #: spinal compression (N s/m), that the plant's joints do not apply: on
+    #: a ball or universal joint, each axis' damping less the joint's
+    #: smallest, which the joint applies to every axis; on the implicit
+    #: design, each damper's explicit part (`step_split`).  Applied by
+    #: `PassiveJoints` about the Cardan rates (see `_joint_damping_vectors`).
     damping_remainder: np.ndarray | None = None
+    #: Implicit design: the shear restraints' springs and SAP's part of their
+    #: dampers as compliant distance constraints (`model.restraints`).
+    restraint_constraints: RestraintConstraints | None = None
     effects: dict = field(default_factory=dict)
     #: The resolved extensions of `effects`, in registration order.
     extensions: tuple[ModelExtension, ...] = ()
@@ -279,20 +299,25 @@ def add_seated_human(
     free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
     free.set_default_translation(body.segments["pelvis"].origin_W)
     _set_default_joint_damping(plant, human, params)
+    stiff = frozenset()
     if design == "implicit":
-        _add_pd_actuators(plant, human, params)
-        _warn_if_step_damping_clips(params, step_damping_limits(plant, human, params))
+        stiff = implicit_springs(body, _spring_stiffness(plant, human, params),
+                                 params.passive.spine_axial_stiffness,
+                                 params.simulation.time_step_s)
+        _add_pd_actuators(plant, human, params, stiff)
+        _warn_about_the_step(params, step_damping_limits(plant, human, params, body))
     body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
+    constraint_ids = ()
+    if design == "implicit":
+        constraint_ids = add_restraint_constraints(plant, body, body_geoms,
+                                                   scene_graph.model_inspector(), params)
     for ext in extensions:
         ext.add_plant_elements(plant, human, seat, body)
     plant.Finalize()
     layout = _joint_layout(plant, human)
-    implicit_k = passive_stiffness_vector(params, layout)
-    implicit_kp = pid_vectors(params, layout)["kp"]
-    if design == "implicit":
+    implicit_k, implicit_kp = _implicit_springs(plant, human, params, layout, stiff)
+    if plant.num_actuators():
         _connect_pd_targets(builder, plant, human)
-    else:
-        implicit_k, implicit_kp = 0.0 * implicit_k, 0.0 * implicit_kp
     return HumanPlant(
         plant=plant,
         scene_graph=scene_graph,
@@ -308,6 +333,9 @@ def add_seated_human(
         implicit_passive=implicit_k,
         implicit_kp=implicit_kp,
         damping_remainder=damping_remainder(plant, human, params, layout),
+        restraint_constraints=(RestraintConstraints.of(plant, constraint_ids,
+                                                       params.simulation.time_step_s)
+                               if constraint_ids else None),
         effects=effects,
         extensions=extensions,
     )
@@ -397,64 +425,54 @@ def _joint_gains(params: ModelParams, name: str, axes) -> tuple[np.ndarray, np.n
 
 
 def _joint_damping(params: ModelParams, name: str, axes) -> np.ndarray:
-    """Joint damping = passive damping + the PID's derivative gain (less
-    what the implicit design's step adds, `step_damping`).
+    """Joint damping = passive damping + the PID's derivative gain (on the
+    implicit design SAP's part of it, `step_split`).
 
     The derivative action -Kd v is exactly a joint damper, and as joint
     damping SAP integrates it implicitly.  Applied as an explicit force it
     is unstable on the 2.3 kg lower-torso slab between L5/S1 and L4/L5 at
     1 ms (c h / I ~ 1.8 of the limit 2); so the PID applies P and I and the
     plant applies D (the PID still reports the full P+I+D torque)."""
-    return step_damping(params, *_joint_gains(params, name, axes))
+    return step_damping(params, _joint_gains(params, name, axes)[0])
 
 
-def step_damping(params: ModelParams, damping, stiffness):
-    """The damping to give SAP so that, with `stiffness` integrated
-    implicitly, the step's damping is `damping` (implicit design).
-
-    SAP evaluates an implicit spring at the step's end, k (q + h v+): to
-    first order in h that is the spring plus a damper h k, which damps a
-    5 Hz mode at 5 ms by omega h / 2 = 0.08 more than the model says (the
-    vertical transmissibility peak falls by ~10%).  Giving the damper
-    c - h k instead leaves the step's damping c, with an O((omega h)^2)
-    error left.  Clipped at zero; the reference design's stiffness is
-    explicit and its damping is left as it is."""
-    damping = np.asarray(damping, float)
-    if params.simulation.design != "implicit":
-        return damping
-    return np.maximum(damping - params.simulation.time_step_s * np.asarray(stiffness, float),
-                      0.0)
-
-
-def step_damping_limits(plant, human, params: ModelParams) -> dict[str, float]:
-    """Per damper of the implicit design, the largest time step (s) at which
-    `step_damping` need not clip, c / k: beyond it the implicit step alone
-    damps more than the model (joint DoFs `<joint>_<x|y|z>`, the spine's
-    axial DoF, the contact pairs)."""
-    limits = {}
+def _spring_stiffness(plant, human, params: ModelParams) -> dict:
+    """{joint: stiffness (passive + PID kp) per Cardan axis x, y, z}, 0 where
+    the joint has no such DoF."""
+    out = {}
     for jname, _, axes in _each_joint(plant, human):
-        damping, stiffness = _joint_gains(params, jname, axes)
-        for axis, c, k in zip(axes, damping, stiffness, strict=True):
-            if k > 0:
-                limits[f"{jname}_{'xyz'[axis]}"] = c / k
-    spine = params.passive
-    limits["spinal_compression"] = spine.spine_axial_damping / spine.spine_axial_stiffness
+        out.setdefault(jname, np.zeros(3))[axes] = _joint_gains(params, jname, axes)[1]
+    return out
+
+
+def step_damping_limits(plant, human, params: ModelParams, body: Body) -> dict[str, float]:
+    """The implicit design's largest time step (s) that keeps each part of
+    the model second-order accurate (see `ehm_drake.model.stepping`): per
+    segment and axis, the step at which its explicit springs reach
+    `STABLE_OMEGA_H` (`<segment>_<x|y|z|axial>`: beyond it the stiffest of
+    them become implicit, first-order); per contact pair, c / (2 k)
+    (`contact <pair>`: beyond it SAP's part of the damper is clipped)."""
+    freqs = segment_frequencies(body, _spring_stiffness(plant, human, params),
+                                params.passive.spine_axial_stiffness)
+    limits = {f"{seg}_{'xyz'[axis] if axis != 'axial' else axis}": STABLE_OMEGA_H / omega
+              for (seg, axis), (omega, _) in freqs.items() if omega > 0}
     for pair in CONTACT_PAIRS:
         cp = getattr(params.contact, pair)
-        limits[f"contact {pair}"] = cp.damping / cp.stiffness
+        limits[f"contact {pair}"] = float(central_limit(cp.damping, cp.stiffness))
     return limits
 
 
-def _warn_if_step_damping_clips(params: ModelParams, limits: dict[str, float]) -> None:
+def _warn_about_the_step(params: ModelParams, limits: dict[str, float]) -> None:
     h = params.simulation.time_step_s
-    clipped = sorted((limit, name) for name, limit in limits.items() if limit < h)
-    if clipped:
-        names = ", ".join(f"{name} ({limit * 1e3:.3g} ms)" for limit, name in clipped)
+    beyond = sorted((limit, name) for name, limit in limits.items() if limit < h)
+    if beyond:
+        names = ", ".join(f"{name} ({limit * 1e3:.3g} ms)" for limit, name in beyond)
         warnings.warn(
-            f"simulation.time_step_s = {h:g} s: the implicit step adds more damping than the "
-            f"model has on {len(clipped)} damper(s), whose damping is then zero instead of "
-            f"c - h k: {names}; a step of at most {clipped[0][0]:.3g} s keeps every damper "
-            "as the parameter file gives it", stacklevel=3)
+            f"simulation.time_step_s = {h:g} s is beyond the second-order step of "
+            f"{len(beyond)} part(s) of the model, where the step is first-order accurate "
+            f"(stiff joint springs integrated implicitly for stability, contact dampers "
+            f"clipped): {names}; a step of at most {beyond[0][0]:.3g} s keeps every part "
+            "second-order accurate (ehm_drake.model.stepping)", stacklevel=3)
 
 
 def _each_joint(plant, human):
@@ -468,24 +486,24 @@ def _each_joint(plant, human):
 
 def _joint_damping_vectors(plant, human, params: ModelParams):
     """(Drake joint, its damping vector, the remainder per axis) of every
-    joint of the human.
+    joint of the human, the spinal compression last.
 
     Drake's BallRpyJoint and UniversalJoint apply the vector's first entry
     to all their axes, and SAP integrates that implicitly; so such a joint
     gets its smallest axis damping on every axis, and the remainder (each
-    axis' damping less that) is left to `PassiveJoints`.  A revolute joint
-    (the Cardan chains) carries its own damping; its remainder is 0."""
+    axis' damping less that) is left to `PassiveJoints`.  On the implicit
+    design (revolute Cardan chains) each damper is split by `step_split`:
+    SAP's part on the joint, the explicit part as the remainder."""
     for jname, joint, axes in _each_joint(plant, human):
         damping = _joint_damping(params, jname, axes)
         if len(axes) > 1:
             floor = float(np.min(damping))
             yield joint, np.full(len(axes), floor), damping - floor
         else:
-            yield joint, damping, np.zeros(1)
-    spine = params.passive
-    yield (plant.GetJointByName("spinal_compression", human),
-           [float(step_damping(params, spine.spine_axial_damping, spine.spine_axial_stiffness))],
-           np.zeros(1))
+            yield joint, damping, step_split(params, _joint_gains(params, jname, axes)[0])[1]
+    implicit, explicit = step_split(params, params.passive.spine_axial_damping)
+    yield (plant.GetJointByName("spinal_compression", human), [float(implicit)],
+           np.array([float(explicit)]))
 
 
 def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
@@ -494,10 +512,12 @@ def _set_default_joint_damping(plant, human, params: ModelParams) -> None:
 
 
 def damping_remainder(plant, human, params: ModelParams, layout: JointLayout) -> np.ndarray:
-    """Per rotational DoF of `layout`, the joint damping the Drake joint does
-    not apply (see `_joint_damping_vectors`), N m s/rad."""
-    out = np.zeros(layout.num_rotational)
+    """Per rotational DoF of `layout`, then for the spinal compression, the
+    joint damping the Drake joint does not apply (see
+    `_joint_damping_vectors`), N m s/rad and N s/m."""
+    out = np.zeros(layout.num_rotational + 1)
     where = {v: i for i, v in enumerate(layout.rot_v)}
+    where[layout.spine_v] = layout.num_rotational
     for joint, _, rest in _joint_damping_vectors(plant, human, params):
         for i, r in enumerate(rest):
             index = where.get(joint.velocity_start() + i)
@@ -506,18 +526,24 @@ def damping_remainder(plant, human, params: ModelParams, layout: JointLayout) ->
     return out
 
 
-def _add_pd_actuators(plant, human, params: ModelParams) -> None:
-    """Implicit design: a PD-controlled actuator on every rotational DoF with
-    stiffness (passive Cardan spring + PID proportional gain, about the
-    reference angle 0) and on the spinal compression (its axial spring).
-    SAP integrates their stiffness implicitly; their damping stays the
-    joints' (also implicit)."""
-    joints = [(joint, float(_joint_gains(params, jname, axes)[1][0]))
-              for jname, joint, axes in _each_joint(plant, human)]
-    joints.append((plant.GetJointByName("spinal_compression", human),
-                   float(params.passive.spine_axial_stiffness)))
-    for joint, stiffness in joints:
-        if stiffness > 0:
+def _joint_springs(plant, human, params: ModelParams):
+    """((joint name, axis), Drake joint, stiffness) of each single-DoF joint
+    of the human: the rotational joints (passive + PID kp; implicit design)
+    and the spinal compression (axis "axial")."""
+    for jname, joint, axes in _each_joint(plant, human):
+        if len(axes) == 1:
+            yield (jname, axes[0]), joint, float(_joint_gains(params, jname, axes)[1][0])
+    spine = plant.GetJointByName(SPINE_AXIAL[0], human)
+    yield SPINE_AXIAL, spine, params.passive.spine_axial_stiffness
+
+
+def _add_pd_actuators(plant, human, params: ModelParams, stiff: frozenset) -> None:
+    """Implicit design: a PD-controlled actuator (stiffness: passive spring +
+    PID proportional gain, about the reference angle 0) on each joint DoF
+    whose spring is in `stiff` (`stepping.implicit_springs`); SAP
+    integrates its stiffness implicitly, the damping stays the joint's."""
+    for key, joint, stiffness in _joint_springs(plant, human, params):
+        if key in stiff and stiffness > 0:
             actuator = plant.AddJointActuator(f"{joint.name()}_pd", joint)
             actuator.set_controller_gains(PdControllerGains(p=stiffness, d=0.0))
 
@@ -532,6 +558,21 @@ def _connect_pd_targets(builder: DiagramBuilder, plant, human) -> None:
     u = builder.AddNamedSystem("pd_feedforward",
                                ConstantVectorSource(np.zeros(plant.num_actuated_dofs())))
     builder.Connect(u.get_output_port(), plant.get_actuation_input_port())
+
+
+def _implicit_springs(plant, human, params: ModelParams, layout: JointLayout,
+                      stiff: frozenset):
+    """The PD actuators' stiffness per DoF of `layout` (zero where the spring
+    is explicit): the passive part (rotational DoFs, then the spinal
+    compression) and the PID's kp."""
+    k = passive_stiffness_vector(params, layout)
+    kp = pid_vectors(params, layout)["kp"]
+    where = {v: i for i, v in enumerate(layout.rot_v)}
+    where[layout.spine_v] = layout.num_rotational
+    mask = np.zeros(layout.num_rotational + 1, bool)
+    for key, joint, _ in _joint_springs(plant, human, params):
+        mask[where[joint.velocity_start()]] = key in stiff
+    return np.where(mask, k, 0.0), np.where(mask[:-1], kp, 0.0)
 
 
 # ---------------------------------------------------------------------------
@@ -562,8 +603,10 @@ def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weig
         properties=props,
     )
     # Relaxation times add up over the pair; the seat's is zero.  SAP's
-    # contact force is implicit, k (x + tau xdot) at the step's end (see
-    # `step_damping`).
+    # contact force is implicit, k (x + tau xdot) at the step's end; on the
+    # implicit design tau carries SAP's part of the damping, less the h k of
+    # its implicit spring, and `ShearRestraints` the explicit part
+    # (`model.stepping`).
     props.AddProperty("material", "relaxation_time",
                       float(step_damping(params, cp.damping, cp.stiffness)) / cp.stiffness)
     if params.contact.model == "hydroelastic":

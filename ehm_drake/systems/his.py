@@ -12,8 +12,9 @@ C0/C1; as generalized force f = (J_w,head - J_w,trunk)^T tau.
 from __future__ import annotations
 
 import numpy as np
+from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
-from pydrake.systems.framework import BasicVector_, LeafSystem_
+from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from . import SCALARS, PlantScratch
@@ -44,6 +45,12 @@ def HeadInSpace_(T):
             self._state_port = self.DeclareVectorInputPort("state", nq + nv)
             self._param = self.DeclareNumericParameter(
                 BasicVector_[T](np.concatenate(self._args[3:6])))
+            # The torque and its generalized force, computed once per state
+            # for both outputs (the logged torque and the plant's input).
+            self._cache = self.DeclareCacheEntry(
+                "head-in-space torque",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
+                              calc=self._calc_cache))
             self._torque_port = self.DeclareVectorOutputPort("torque", 3, self._calc_torque)
             self.DeclareVectorOutputPort("generalized_force", nv, self._calc_force)
 
@@ -70,14 +77,16 @@ def HeadInSpace_(T):
             w_WH = J_head @ x[self._nq:]
             return -(g[0:3] * e + g[3:6] * w_WH)
 
-        def _calc_torque(self, context, output):
-            x, R_WH, (J_head, _) = self._kinematics(context)
-            output.SetFromVector(self._tau(context, x, R_WH, J_head))
-
-        def _calc_force(self, context, output):
+        def _calc_cache(self, context, value):
             x, R_WH, (J_head, J_trunk) = self._kinematics(context)
             tau = self._tau(context, x, R_WH, J_head)
-            output.SetFromVector((J_head - J_trunk).T @ tau)
+            value.set_value((tau, (J_head - J_trunk).T @ tau))
+
+        def _calc_torque(self, context, output):
+            output.SetFromVector(self._cache.Eval(context)[0])
+
+        def _calc_force(self, context, output):
+            output.SetFromVector(self._cache.Eval(context)[1])
 
     return Impl
 

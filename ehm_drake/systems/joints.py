@@ -10,8 +10,10 @@ the angle rates, so a Cardan torque tau maps to the generalized force
 f = N(q)^T tau, where N(q) maps w_FM_F to the angle rates; this keeps the
 springs conservative at any angle.  Their dampers are the plant's joint
 damping (implicit in SAP), except what a ball or universal joint cannot
-carry (Drake applies its first damping entry to every axis): that remainder
-acts here about the Cardan rates, rpy_dot = N(q) w, mapped back by N^T.
+carry (Drake applies its first damping entry to every axis) and, on the
+implicit design, the explicit half of every damper (`model.stepping`):
+that remainder acts here about the Cardan rates, rpy_dot = N(q) w, mapped
+back by N^T.
 
 The PID acts on the generalized coordinates: the joint angles q (error
 against the reference posture) and the joint velocities v, and returns
@@ -106,14 +108,15 @@ def PassiveJoints_(T):
 
         `implicit` (same layout as the stiffness; implicit design): the
         stiffness about position 0 that the plant's PD actuators already
-        apply (`HumanPlant.implicit_passive`); the output is the springs'
-        force minus that, zero when the parameters are those the plant was
-        built with.
+        apply (`HumanPlant.implicit_passive`, zero where the spring is
+        explicit); the output is the springs' force minus that.
 
-        `damping_remainder` (one value per rotational DoF, N m s/rad): the
-        joint damping the plant's ball and universal joints do not apply
-        (`HumanPlant.damping_remainder`), applied here as -c rpy_dot about
-        the Cardan rates.
+        `damping_remainder` (one value per rotational DoF, N m s/rad, then
+        one for the spinal compression, N s/m): the joint damping the
+        plant's joints do not apply (`HumanPlant.damping_remainder`: the
+        ball and universal joints' per-axis excess, the implicit design's
+        explicit part of each damper), applied here as -c rpy_dot about the
+        Cardan rates and -c v on the spinal compression.
         """
 
         def _construct(self, layout: JointLayout, stiffness, neutral, implicit=None,
@@ -124,7 +127,7 @@ def PassiveJoints_(T):
                 else np.asarray(implicit, float)
             self._damping = None if damping_remainder is None or not np.any(damping_remainder) \
                 else np.asarray(damping_remainder, float)
-            assert self._damping is None or self._damping.shape == (layout.num_rotational,)
+            assert self._damping is None or self._damping.shape == (layout.num_rotational + 1,)
             self._ball = _BallIndex(layout)
             n = layout.num_rotational + 1
             stiffness = np.asarray(stiffness, float)
@@ -157,7 +160,9 @@ def PassiveJoints_(T):
             if self._damping is not None:
                 m = len(self._layout.rot_v)
                 rates = cardan_rates(self._ball, q[:m], x[self._layout.nq + self._layout.rot_v])
-                tau[:m] = tau[:m] - self._damping * rates
+                tau[:m] = tau[:m] - self._damping[:m] * rates
+                if self._damping[m] != 0.0:
+                    tau[m] = tau[m] - self._damping[m] * x[self._layout.nq + self._layout.spine_v]
             f = np.zeros(self._layout.nv, dtype=tau.dtype)
             f[self._v_index] = cardan_to_generalized(self._ball, q, tau)
             output.SetFromVector(f)

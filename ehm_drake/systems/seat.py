@@ -19,73 +19,22 @@ contact slips); the slip is a discrete state.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from ..model.plant import HumanPlant
-from ..params import CONTACT_PAIRS, ModelParams
+from ..model.restraints import (  # noqa: F401  (re-exported: the seat's parts and points)
+    SEAT_PART_NAMES,
+    SEAT_PARTS,
+    RestraintConstraints,
+    RestraintPoint,
+    restraint_points,
+)
+from ..model.stepping import step_split
+from ..params import ModelParams
 from . import SCALARS, PlantScratch
-
-#: Seat parts, their outward normal in S, and the tangential restraint axes.
-SEAT_PARTS = {
-    "pan": (np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])),
-    "floor": (np.array([0.0, 0.0, 1.0]), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])),
-    "lower_pad": (np.array([1.0, 0.0, 0.0]), np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])),
-    "upper_pad": (np.array([1.0, 0.0, 0.0]), np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])),
-}
-SEAT_PART_NAMES = tuple(SEAT_PARTS)
-
-
-@dataclass(frozen=True)
-class RestraintPoint:
-    """One shear restraint: a body point, its seat anchor and two axes."""
-
-    name: str  # the body ellipsoid's name
-    pair: str  # contact pair (parameter group)
-    part: str  # seat part
-    body: str  # body name
-    p_BP: np.ndarray  # attachment point in the body frame
-    p_SA: np.ndarray  # anchor in the seat frame (before slip)
-    axes: np.ndarray  # (2, 3) tangential unit vectors in S
-    normal: np.ndarray  # (3,) outward normal of the seat part, in S
-    #: Seat face position minus the anchor along the normal (m): the
-    #: point's penetration is face_offset - (p - p_SA).normal.
-    face_offset: float
-
-
-def restraint_points(hp: HumanPlant) -> list[RestraintPoint]:
-    """Restraints at each contact ellipsoid's point nearest its seat part.
-
-    The attachment point is the ellipsoid's extreme point against the seat
-    part's normal; the anchor is that point in the reference posture.
-    """
-    inspector = hp.scene_graph.model_inspector()
-    plant = hp.plant
-    context = plant.CreateDefaultContext()
-    points = []
-    for pair, (names, part) in CONTACT_PAIRS.items():
-        normal, axes = SEAT_PARTS[part]
-        for name in names:
-            gid, _ = hp.body_geometries[name]
-            shape = inspector.GetShape(gid)
-            semi = np.array([shape.a(), shape.b(), shape.c()])
-            body = plant.GetBodyFromFrameId(inspector.GetFrameId(gid))
-            # Ellipsoid axes are parallel to the body frame, which is parallel
-            # to S in the reference posture: extreme point along -normal.
-            p_BP = inspector.GetPoseInFrame(gid).translation() - semi * normal
-            X_SB = plant.EvalBodyPoseInWorld(context, body)
-            p_SA = X_SB.multiply(p_BP)
-            c, size = hp.body.seat.boxes[part]
-            face = float(c @ normal + 0.5 * size @ np.abs(normal))
-            points.append(RestraintPoint(name, pair, part, body.name(), p_BP, p_SA, axes,
-                                         normal, face - float(p_SA @ normal)))
-    return points
-
 
 #: Blocks of the packed parameter vector of ShearRestraints (n values each).
 RESTRAINT_PARAMETERS = ("stiffness", "damping", "force_limit", "contact_gated",
@@ -125,6 +74,14 @@ def restraint_parameters(params: ModelParams, points, gated_parts=(), cubic=None
                            per_point(friction), [x.stiffness for x in c]])
 
 
+def contact_explicit_damping(params: ModelParams, points) -> np.ndarray:
+    """Per restraint point, the explicit part of its contact pair's damping
+    (N s/m; `step_split`: zero on the reference design)."""
+    return np.array([float(step_split(params, getattr(params.contact, p.pair).damping,
+                                      getattr(params.contact, p.pair).stiffness)[1])
+                     for p in points])
+
+
 def restraint_block(vector: np.ndarray, name: str) -> np.ndarray:
     """View of block `name` of a packed restraint parameter vector."""
     nb = len(RESTRAINT_PARAMETERS)
@@ -148,12 +105,27 @@ def ShearRestraints_(T):
         normal; negative = compressed) and ``deflection`` (2 per point, m,
         elastic shear deflection beyond the slipped anchor).  Discrete
         state: slip of each anchor along its two axes (m).  Numeric
-        parameter: the packed vector of `RESTRAINT_PARAMETERS`."""
+        parameter: the packed vector of `RESTRAINT_PARAMETERS`.
 
-        def _construct(self, plant, points, parameters, period, converter=None):
+        Implicit design (`ehm_drake.model.stepping`): `constraints`, the
+        plant's restraint constraints (`HumanPlant.restraint_constraints`),
+        which apply each axis' linear spring-damper implicitly; the
+        generalized force is then the force law minus their force
+        evaluated here at the step's start.  `contact_damping` (per point,
+        N s/m): the explicit part of the contact pair's damping, applied
+        along the normal while the point is in contact (reported in the
+        point and seat forces: it is part of the contact force)."""
+
+        def _construct(self, plant, points, parameters, period, constraints=None,
+                       contact_damping=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            self._args = (plant, list(points), np.array(parameters, float), float(period))
+            self._args = (plant, list(points), np.array(parameters, float), float(period),
+                          constraints, None if contact_damping is None
+                          else np.array(contact_damping, float))
             self._points = self._args[1]
+            self._constraints = constraints
+            self._contact_damping = (self._args[5] if self._args[5] is not None
+                                     and np.any(self._args[5]) else None)
             n = len(points)
             self._n = n
             if self._args[2].size != len(RESTRAINT_PARAMETERS) * n:
@@ -197,7 +169,7 @@ def ShearRestraints_(T):
             self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
             self._kin = self.DeclareCacheEntry(
                 "restraint kinematics",
-                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 5),
+                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 7),
                               calc=self._calc_kinematics),
                 prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())},
             )
@@ -209,6 +181,13 @@ def ShearRestraints_(T):
                               calc=self._calc_axis_params),
                 prerequisites_of_calc={self.all_parameters_ticket()},
             )
+            # The force law's result, computed once per state for the plant's
+            # input and the logged seat forces.
+            self._law = self.DeclareCacheEntry(
+                "restraint forces",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
+                              calc=lambda context, value: value.set_value(
+                                  self._calc_forces(context))))
             self._axis_of = np.repeat(np.arange(n), 2)
             self._force_port = self.DeclareVectorOutputPort(
                 "point_forces", 3 * n, self._calc_point_forces)
@@ -255,9 +234,14 @@ def ShearRestraints_(T):
                            for frame, P_B, _ in self._groups])
             vel = J @ x[self._nq:]
             # Rows are grouped per body; the projection matrices are permuted
-            # to match once at construction.
+            # to match once at construction.  Also the points' positions and
+            # velocities in point order (n x 3).
+            p_pts, v_pts = np.empty((self._n, 3), dtype=pos.dtype), np.empty((self._n, 3),
+                                                                            dtype=vel.dtype)
+            p_pts[self._order], v_pts[self._order] = pos.reshape(-1, 3), vel.reshape(-1, 3)
             value.set_value((J, self._A_grouped @ pos - self._a0, self._A_grouped @ vel,
-                             self._N_grouped @ pos - self._n0, self._N_grouped @ vel))
+                             self._N_grouped @ pos - self._n0, self._N_grouped @ vel,
+                             p_pts, v_pts))
 
         def _calc_axis_params(self, context, value):
             g = context.get_numeric_parameter(self._param).CopyToVector().reshape(
@@ -289,7 +273,10 @@ def ShearRestraints_(T):
 
         def _forces(self, context):
             """(tangential force per axis (2n), normal force per point (n))."""
-            _, pos, vel, pos_n, vel_n = self._kin.Eval(context)
+            return self._law.Eval(context)
+
+        def _calc_forces(self, context):
+            _, pos, vel, pos_n, vel_n, _, _ = self._kin.Eval(context)
             prm = self._axis_params.Eval(context)
             slip = context.get_discrete_state(self._slip).CopyToVector()
             fmax = self._limits(prm, pos_n)
@@ -304,7 +291,23 @@ def ShearRestraints_(T):
                 d = prm["ref"] - pos_n  # extra compression (m)
                 touching = self._in_contact(pos_n)
                 fn = (prm["k3"] * d * d * d + prm["k_lin"] * d - prm["c_lin"] * vel_n) * touching
+            if self._contact_damping is not None:
+                fn = fn - self._contact_damping * vel_n * self._in_contact(pos_n)
             return f, fn
+
+        def _constraint_force(self, context):
+            """The restraint constraints' force on each point (n x 3, in S)
+            at the step's start: -(k (d - L) + c ddot) along the unit vector
+            from the anchor, c the damping SAP applies at the step's end."""
+            c = self._constraints
+            _, _, _, _, _, p_pts, v_pts = self._kin.Eval(context)
+            axis_of = self._axis_of
+            r = p_pts[axis_of] - c.p_SQ
+            d = np.sqrt(np.sum(r * r, axis=1))
+            u = r / d[:, None]
+            d_dot = np.sum(u * v_pts[axis_of], axis=1)
+            f = -(c.stiffness * (d - c.length) + c.step_damping * d_dot)[:, None] * u
+            return f.reshape(self._n, 2, 3).sum(axis=1)
 
         def _calc_point_forces(self, context, output):
             f, fn = self._forces(context)
@@ -313,7 +316,10 @@ def ShearRestraints_(T):
         def _calc_force(self, context, output):
             J = self._kin.Eval(context)[0]
             f, fn = self._forces(context)
-            output.SetFromVector(J.T @ (self._A_grouped.T @ f + self._N_grouped.T @ fn))
+            F = self._A_grouped.T @ f + self._N_grouped.T @ fn
+            if self._constraints is not None:  # the plant applies them
+                F = F - self._constraint_force(context)[self._order].reshape(-1)
+            output.SetFromVector(J.T @ F)
 
         def _calc_seat_forces(self, context, output):
             output.SetFromVector(self._sum_parts @ self._force_port.Eval(context))
@@ -326,7 +332,7 @@ def ShearRestraints_(T):
             output.SetFromVector(pos - context.get_discrete_state(self._slip).CopyToVector())
 
         def _update(self, context, discrete_state):
-            _, pos, _, pos_n, _ = self._kin.Eval(context)
+            _, pos, _, pos_n, _, _, _ = self._kin.Eval(context)
             prm = self._axis_params.Eval(context)
             slip = context.get_discrete_state(self._slip).CopyToVector()
             # The elastic deflection may not exceed fmax/k: the anchor slides.
