@@ -2,6 +2,7 @@
 RMS per axis, random 0.1-12 Hz), outputs logged at 200 Hz, one core.
 
     python bench/bench_simulate.py [--duration 60] [--time-step 0.001]
+        [--design reference|implicit]
 
 Prints the settle time (static equilibrium + 5 s settling), the real-time
 factor of the vibration run (simulated seconds per wall second) and the
@@ -57,12 +58,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--time-step", type=float, default=None)
+    ap.add_argument("--design", choices=("reference", "implicit"), default=None,
+                    help="simulation.design (default: the parameter file's)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
     params = load_params()
     if args.time_step:
         params.simulation.time_step_s = args.time_step
+    if args.design:
+        params.simulation.design = args.design
     s = params.simulation
     t0 = time.perf_counter()
     settled = settle(params)
@@ -70,7 +75,8 @@ def main() -> None:
     signal = make_seat_signal("random", "xyz", 0.1941, args.duration, 1, s.time_step_s,
                               s.settle_time_s, s.onset_time_s)
     result = vibrate(params, settled, signal)
-    print(f"time step {s.time_step_s * 1e3:g} ms, outputs at {s.output_rate_hz:g} Hz")
+    print(f"{s.design} design, time step {s.time_step_s * 1e3:g} ms, outputs at "
+          f"{s.output_rate_hz:g} Hz")
     print(f"settle (equilibrium + {s.settle_time_s:g} s): {t_settle:.1f} s wall")
     print(f"vibrate {args.duration:g} s of 3D excitation: {result.meta['wall_s']:.1f} s wall, "
           f"real-time factor {result.meta['real_time_factor']:.2f}")

@@ -315,7 +315,7 @@ def add_seated_human(
         ext.add_plant_elements(plant, human, seat, body)
     plant.Finalize()
     layout = _joint_layout(plant, human)
-    implicit_k, implicit_kp = _implicit_springs(plant, human, params, layout, stiff)
+    implicit_k, implicit_kp = _pd_stiffness_vectors(plant, human, params, layout, stiff)
     if plant.num_actuators():
         _connect_pd_targets(builder, plant, human)
     return HumanPlant(
@@ -560,8 +560,8 @@ def _connect_pd_targets(builder: DiagramBuilder, plant, human) -> None:
     builder.Connect(u.get_output_port(), plant.get_actuation_input_port())
 
 
-def _implicit_springs(plant, human, params: ModelParams, layout: JointLayout,
-                      stiff: frozenset):
+def _pd_stiffness_vectors(plant, human, params: ModelParams, layout: JointLayout,
+                          stiff: frozenset):
     """The PD actuators' stiffness per DoF of `layout` (zero where the spring
     is explicit): the passive part (rotational DoFs, then the spinal
     compression) and the PID's kp."""

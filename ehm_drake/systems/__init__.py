@@ -10,36 +10,65 @@ Conventions shared by the systems here:
   costs seconds and tells nothing the port declarations don't.
 * Force-producing systems take the plant state [q; v] as input and output
   generalized forces (nv), which one Adder sums into the plant.  Where they
-  need kinematics they evaluate it in C++ on a private scratch context of
-  the plant (`PlantScratch`): one call returns a Jacobian, where reading the
-  plant's pose ports from Python would convert every body's pose.  In
-  profiling this made the Python side of a time step 4x cheaper.  A system
-  is not thread-safe while stepping (its scratch context is shared state);
-  parallel studies use processes.
+  need kinematics they evaluate it in C++ on a scratch context of the plant
+  (`PlantScratch`, one per plant shared by its systems, so the kinematics
+  are computed once per state): one call returns a Jacobian, where reading
+  the plant's pose ports from Python would convert every body's pose.  In
+  profiling this made the Python side of a time step 4x cheaper.  The
+  systems are not thread-safe while stepping (the scratch context is shared
+  state); parallel studies use processes.
 """
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
+import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 
 SCALARS = (float, AutoDiffXd)
 
 _converted_plants: dict = {}
+#: (plant id, float) -> (plant, its shared scratch context, [the bytes of the
+#: state it holds]), the most recently built plants only (the systems keep their
+#: context; the plant is kept so that its id is not reused meanwhile).
+_shared_contexts: OrderedDict = OrderedDict()
+_SHARED_CONTEXTS_KEPT = 8
 
 
 class PlantScratch:
-    """A plant of the system's scalar type and a scratch context for it."""
+    """A plant of the system's scalar type and a scratch context for it.
+
+    For float, the systems of one plant share one scratch context, and
+    `set_state` leaves it alone when the state is the one it holds: the
+    plant's kinematics are then computed once per state for all of them
+    (in profiling, the force systems and the measurements each recomputed
+    them every step)."""
 
     def __init__(self, plant, T):
+        key = (id(plant), T)
         if T is float:
             self.plant = plant
+            if key not in _shared_contexts:
+                _shared_contexts[key] = (plant, plant.CreateDefaultContext(), [None])
+                while len(_shared_contexts) > _SHARED_CONTEXTS_KEPT:
+                    _shared_contexts.popitem(last=False)
+            _shared_contexts.move_to_end(key)
+            _, self.context, self._held = _shared_contexts[key]
         else:
-            key = (id(plant), T)
             if key not in _converted_plants:
                 _converted_plants[key] = (plant, plant.ToScalarType[T]())
             self.plant = _converted_plants[key][1]
-        self.context = self.plant.CreateDefaultContext()
+            self.context = self.plant.CreateDefaultContext()
+            self._held = None
 
     def set_state(self, x):
-        self.plant.SetPositionsAndVelocities(self.context, x)
+        """The scratch context at plant state x."""
+        if self._held is None:
+            self.plant.SetPositionsAndVelocities(self.context, x)
+            return self.context
+        key = np.ascontiguousarray(x, float).tobytes()
+        if key != self._held[0]:
+            self.plant.SetPositionsAndVelocities(self.context, x)
+            self._held[0] = key
         return self.context

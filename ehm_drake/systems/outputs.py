@@ -16,7 +16,13 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.plant import ContactResults
 from pydrake.multibody.tree import JointIndex
-from pydrake.systems.framework import BasicVector_, EventStatus, LeafSystem, LeafSystem_
+from pydrake.systems.framework import (
+    BasicVector_,
+    EventStatus,
+    LeafSystem,
+    LeafSystem_,
+    ValueProducer,
+)
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from . import SCALARS, PlantScratch
@@ -60,6 +66,13 @@ def BodyChannels_(T):
                 "state", sp.num_positions() + sp.num_velocities())
             self._disp = self.DeclareVectorInputPort("seat_displacement", 3)
             self._settled = self.DeclareNumericParameter(BasicVector_[T](settled))
+            # The settled pose's positions and rotations (transposed), once
+            # per parameter value rather than every step.
+            self._reference = self.DeclareCacheEntry(
+                "settled pose",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
+                              calc=self._calc_reference),
+                prerequisites_of_calc={self.all_parameters_ticket()})
             self.DeclareVectorOutputPort("channels", 6 * n, self._calc)
 
         def _construct_copy(self, other, converter=None):
@@ -83,14 +96,18 @@ def BodyChannels_(T):
             return np.concatenate([np.concatenate([p, rpy_from_rotation(R)])
                                    for p, R in self.marker_poses(x)])
 
+        def _calc_reference(self, context, value):
+            ref = context.get_numeric_parameter(self._settled).CopyToVector().reshape(-1, 6)
+            value.set_value((ref[:, :3], [rotation_from_rpy(r).T for r in ref[:, 3:]]))
+
         def _calc(self, context, output):
             x = self._state.Eval(context)
             d = self._disp.Eval(context)
-            ref = context.get_numeric_parameter(self._settled).CopyToVector().reshape(-1, 6)
+            p_ref, R_ref_T = self._reference.Eval(context)
             y = []
             for i, (p, R) in enumerate(self.marker_poses(x)):
-                rel = rpy_from_rotation(R @ rotation_from_rpy(ref[i, 3:]).T)
-                y.append(np.concatenate([p - ref[i, :3] + d, rel]))
+                rel = rpy_from_rotation(R @ R_ref_T[i])
+                y.append(np.concatenate([p - p_ref[i] + d, rel]))
             output.SetFromVector(np.concatenate(y))
 
     return Impl
