@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import Adder, PassThrough, VectorLogSink
+from pydrake.systems.primitives import Adder, Multiplexer, PassThrough, VectorLogSink
 
 from .model.anthropometry import REFERENCE, BodyMeasures
 from .model.extensions import (
@@ -63,6 +63,29 @@ from .systems.seat import (
 )
 
 SEAT_FORCE_NAMES = tuple(f"{p}_f{a}" for p in SEAT_PART_NAMES for a in "xyz")
+
+
+class LoggedOutput:
+    """One logged output port: its rows of the diagram's single log sink.
+    `FindLog(root_context)` returns a log with `sample_times()` and
+    `data()` (size x samples), as Drake's `VectorLog`."""
+
+    def __init__(self, sink: VectorLogSink, rows: slice):
+        self.sink, self.rows = sink, rows
+
+    def FindLog(self, root_context):  # noqa: N802  (Drake's name)
+        return _LogRows(self.sink.FindLog(root_context), self.rows)
+
+
+class _LogRows:
+    def __init__(self, log, rows: slice):
+        self._log, self._rows = log, rows
+
+    def sample_times(self) -> np.ndarray:
+        return self._log.sample_times()
+
+    def data(self) -> np.ndarray:
+        return self._log.data()[self._rows]
 
 
 @dataclass
@@ -127,8 +150,9 @@ def build_diagram(
     measures : anthropometry of the body (default: 50th-percentile male).
     signal : seat excitation to play; None exports the seat input ports.
     variant : "default", "no-integrator" or "high-stiffness".
-    log_period : if given, VectorLogSinks record the channels, seat motion,
-        seat forces and torques at this period (s).
+    log_period : if given, one VectorLogSink records the channels, seat
+        motion, seat forces, torques and plant state at this period (s);
+        `EhmDiagram.loggers` gives each output's rows (`LoggedOutput`).
     guard : add the `DivergenceGuard` (blow-up detection).
     seat_forces : add the `SeatForces` measurement (contact results: a
         second contact solve per evaluation; linearizations that only need
@@ -251,14 +275,19 @@ def build_diagram(
         builder.ExportOutput(port, name)
     loggers = {}
     if log_period is not None:
-        for name in ("channels", "seat_forces", "joint_torques", "his_torque",
-                     "seat_acceleration", "seat_displacement", "state"):
-            if name not in outputs:
-                continue
-            port = outputs[name]
-            log = builder.AddNamedSystem(f"log_{name}", VectorLogSink(port.size(), log_period))
-            builder.Connect(port, log.get_input_port())
-            loggers[name] = log
+        # One sink for all of them (a Multiplexer in front): every sink is a
+        # publish event per period, about 20 us each at a 5 ms step.
+        names = [n for n in ("channels", "seat_forces", "joint_torques", "his_torque",
+                             "seat_acceleration", "seat_displacement", "state") if n in outputs]
+        sizes = [outputs[n].size() for n in names]
+        mux = builder.AddNamedSystem("logged_outputs", Multiplexer(sizes))
+        for i, name in enumerate(names):
+            builder.Connect(outputs[name], mux.get_input_port(i))
+        sink = builder.AddNamedSystem("log", VectorLogSink(sum(sizes), log_period))
+        builder.Connect(mux.get_output_port(), sink.get_input_port())
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        loggers = {name: LoggedOutput(sink, slice(offsets[i], offsets[i + 1]))
+                   for i, name in enumerate(names)}
     diagram = builder.Build()
     diagram.set_name("ehm_seated_human")
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
