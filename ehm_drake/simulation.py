@@ -52,20 +52,27 @@ class EquilibriumError(RuntimeError):
 
 class StateMap:
     """The diagram's discrete state groups (plant, PID, restraints) as one
-    stacked vector, in the order of the diagram's own discrete values."""
+    stacked vector, in the order of the diagram's own discrete values.
+
+    A group is named by its system; a system with several groups (the
+    implicit design's `ForceLaws`) names each by the part it belongs to
+    (`discrete_state_view(group)`, e.g. ``joint_pid``)."""
 
     def __init__(self, model):
         """`model`: an EhmDiagram or any Drake Diagram with discrete states."""
         self.diagram = model.diagram if isinstance(model, EhmDiagram) else model
-        systems = [s for s in self.diagram.GetSystems() if s.num_discrete_state_groups() > 0]
+        groups = [(s, g) for s in self.diagram.GetSystems()
+                  for g in range(s.num_discrete_state_groups())]
         # Find the diagram's group order by tagging each subsystem's state.
         ctx = self.diagram.CreateDefaultContext()
-        for i, s in enumerate(systems):
+        for i, (s, g) in enumerate(groups):
             sub = s.GetMyMutableContextFromRoot(ctx).get_mutable_discrete_state()
-            sub.get_mutable_vector(0).SetFromVector(np.full(sub.get_vector(0).size(), i + 0.5))
+            sub.get_mutable_vector(g).SetFromVector(np.full(sub.get_vector(g).size(), i + 0.5))
         root = ctx.get_discrete_state()
         order = [int(root.get_vector(g).GetAtIndex(0)) for g in range(root.num_groups())]
-        self.systems = [systems[i] for i in order]
+        #: The owner of each group (a system, or the part of one), in order.
+        self.systems = [s.discrete_state_view(g) if s.num_discrete_state_groups() > 1 else s
+                        for s, g in (groups[i] for i in order)]
         self.sizes = [root.get_vector(g).size() for g in range(root.num_groups())]
         self.offsets = np.concatenate([[0], np.cumsum(self.sizes)]).astype(int)
         self.size = int(self.offsets[-1])

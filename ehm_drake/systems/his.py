@@ -21,6 +21,12 @@ from . import SCALARS, PlantScratch
 from .rotations import rotation_from_rpy, rpy_from_rotation
 
 
+def head_in_space_torque(kp, kd, R_WH, R_ref_T, w_WH):
+    """tau_W = -(Kp e + Kd w_WH), e the roll, pitch, yaw of R_WH R_ref^T
+    (`R_ref_T`: the reference head orientation, transposed)."""
+    return -(kp * rpy_from_rotation(R_WH @ R_ref_T) + kd * w_WH)
+
+
 @TemplateSystem.define("HeadInSpace_", T_list=SCALARS)
 def HeadInSpace_(T):
     class Impl(LeafSystem_[T]):
@@ -73,9 +79,8 @@ def HeadInSpace_(T):
 
         def _tau(self, context, x, R_WH, J_head):
             g = context.get_numeric_parameter(self._param).CopyToVector()
-            e = rpy_from_rotation(R_WH @ rotation_from_rpy(g[6:9]).T)
-            w_WH = J_head @ x[self._nq:]
-            return -(g[0:3] * e + g[3:6] * w_WH)
+            return head_in_space_torque(g[0:3], g[3:6], R_WH, rotation_from_rpy(g[6:9]).T,
+                                        J_head @ x[self._nq:])
 
         def _calc_cache(self, context, value):
             x, R_WH, (J_head, J_trunk) = self._kinematics(context)

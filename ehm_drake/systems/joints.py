@@ -68,7 +68,10 @@ class _BallIndex:
 
 
 def cardan_to_generalized(ball: _BallIndex, q_rot, tau):
-    """f = N(q)^T tau on the ball joints (identity on the other DoFs)."""
+    """f = N(q)^T tau on the ball joints (identity on the other DoFs; `tau`
+    itself when there is no ball joint)."""
+    if not len(ball.roll):
+        return tau
     p = q_rot[ball.pitch]
     y = q_rot[ball.yaw]
     cp, cy, sy = np.cos(p), np.cos(y), np.sin(y)
@@ -82,7 +85,10 @@ def cardan_to_generalized(ball: _BallIndex, q_rot, tau):
 
 def cardan_rates(ball: _BallIndex, q_rot, v_rot):
     """The Cardan angle rates of the rotational DoFs: N(q) w on the ball
-    joints (whose generalized velocities are w_FM_F), v elsewhere."""
+    joints (whose generalized velocities are w_FM_F), v elsewhere (`v_rot`
+    itself when there is no ball joint)."""
+    if not len(ball.roll):
+        return v_rot
     p = q_rot[ball.pitch]
     y = q_rot[ball.yaw]
     cp, cy, sy = np.cos(p), np.cos(y), np.sin(y)
@@ -93,6 +99,28 @@ def cardan_rates(ball: _BallIndex, q_rot, v_rot):
     rates[ball.pitch] = cy * wy - sy * wx
     rates[ball.yaw] = v_rot[ball.yaw] + u * np.sin(p)
     return rates
+
+
+def passive_torque(stiffness_and_neutral, q, v_rot, v_spine, ball: _BallIndex, implicit=None,
+                   damping=None):
+    """The passive restraints' generalized force on the rotational DoFs and
+    the spinal compression (in `PassiveJoints`' layout: the rotational DoFs,
+    then the spine): Cardan springs about their neutral angles (less the
+    part `implicit` that the plant's PD actuators apply about 0) and the
+    damping remainder `damping` about the Cardan rates, mapped by N(q)^T.
+    `q`: the DoFs' positions in that layout; `v_rot`, `v_spine`: their
+    generalized velocities."""
+    n = len(q)
+    tau = -stiffness_and_neutral[:n] * (q - stiffness_and_neutral[n:])
+    if implicit is not None:
+        tau = tau + implicit * q
+    if damping is not None:
+        m = len(v_rot)
+        rates = cardan_rates(ball, q[:m], v_rot)
+        tau[:m] = tau[:m] - damping[:m] * rates
+        if damping[m] != 0.0:
+            tau[m] = tau[m] - damping[m] * v_spine
+    return cardan_to_generalized(ball, q, tau)
 
 
 @TemplateSystem.define("PassiveJoints_", T_list=SCALARS)
@@ -151,20 +179,12 @@ def PassiveJoints_(T):
 
         def _calc(self, context, output):
             x = self._state_port.Eval(context)
-            kq0 = context.get_numeric_parameter(self._param).CopyToVector()
-            n = len(self._q_index)
-            q = x[self._q_index]
-            tau = -kq0[:n] * (q - kq0[n:])
-            if self._implicit is not None:
-                tau = tau + self._implicit * q
-            if self._damping is not None:
-                m = len(self._layout.rot_v)
-                rates = cardan_rates(self._ball, q[:m], x[self._layout.nq + self._layout.rot_v])
-                tau[:m] = tau[:m] - self._damping[:m] * rates
-                if self._damping[m] != 0.0:
-                    tau[m] = tau[m] - self._damping[m] * x[self._layout.nq + self._layout.spine_v]
-            f = np.zeros(self._layout.nv, dtype=tau.dtype)
-            f[self._v_index] = cardan_to_generalized(self._ball, q, tau)
+            L = self._layout
+            tau = passive_torque(context.get_numeric_parameter(self._param).CopyToVector(),
+                                 x[self._q_index], x[L.nq + L.rot_v], x[L.nq + L.spine_v],
+                                 self._ball, self._implicit, self._damping)
+            f = np.zeros(L.nv, dtype=tau.dtype)
+            f[self._v_index] = tau
             output.SetFromVector(f)
 
     return Impl

@@ -26,7 +26,7 @@ from pydrake.systems.framework import (
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from . import SCALARS, PlantScratch
-from .rotations import rotation_from_rpy, rpy_from_rotation
+from .rotations import rotation_from_rpy, rpy_from_rotation, rpy_from_rotation_list
 from .seat import SEAT_PART_NAMES
 
 SEGMENTS = ("pelvis", "trunk", "head", "knee_l", "knee_r")
@@ -62,6 +62,7 @@ def BodyChannels_(T):
             self._scratch = PlantScratch(plant, T)
             sp = self._scratch.plant
             self._bodies = [sp.GetBodyByName(b) for b, _ in self._markers]
+            self._p_BM = np.array([p for _, p in self._markers])[:, :, None]
             self._state = self.DeclareVectorInputPort(
                 "state", sp.num_positions() + sp.num_velocities())
             self._disp = self.DeclareVectorInputPort("seat_displacement", 3)
@@ -98,17 +99,36 @@ def BodyChannels_(T):
 
         def _calc_reference(self, context, value):
             ref = context.get_numeric_parameter(self._settled).CopyToVector().reshape(-1, 6)
-            value.set_value((ref[:, :3], [rotation_from_rpy(r).T for r in ref[:, 3:]]))
+            # R_ref^T per marker, stacked for the float path with each
+            # matrix laid out as the transposed view it is on the other.
+            R_ref = np.array([rotation_from_rpy(r) for r in ref[:, 3:]])
+            value.set_value((ref[:, :3], R_ref.transpose(0, 2, 1)))
 
         def _calc(self, context, output):
             x = self._state.Eval(context)
             d = self._disp.Eval(context)
             p_ref, R_ref_T = self._reference.Eval(context)
-            y = []
-            for i, (p, R) in enumerate(self.marker_poses(x)):
-                rel = rpy_from_rotation(R @ R_ref_T[i])
-                y.append(np.concatenate([p - p_ref[i] + d, rel]))
-            output.SetFromVector(np.concatenate(y))
+            if T is not float:
+                y = []
+                for i, (p, R) in enumerate(self.marker_poses(x)):
+                    rel = rpy_from_rotation(R @ R_ref_T[i])
+                    y.append(np.concatenate([p - p_ref[i] + d, rel]))
+                output.SetFromVector(np.concatenate(y))
+                return
+            # All markers at once.  Drake's poses are column-major: stacked
+            # as transposes, each rotation below is laid out as the
+            # per-marker matrix of `marker_poses`, so the products round the
+            # same (the channels are bit-for-bit those of the per-marker
+            # computation; tests/test_force_laws.py).
+            ctx = self._scratch.set_state(x)
+            plant = self._scratch.plant
+            X_T = np.array([plant.EvalBodyPoseInWorld(ctx, body).GetAsMatrix34().T
+                            for body in self._bodies])
+            R = X_T[:, :3, :].transpose(0, 2, 1)
+            y = np.empty((len(self._bodies), 6))
+            y[:, :3] = X_T[:, 3, :] + (R @ self._p_BM)[:, :, 0] - p_ref + d
+            y[:, 3:] = [rpy_from_rotation_list(r) for r in (R @ R_ref_T).tolist()]
+            output.SetFromVector(y.reshape(-1))
 
     return Impl
 
@@ -137,14 +157,17 @@ class SeatForces(LeafSystem):
     def _calc(self, context, output):
         out = self._restraints.Eval(context).reshape(-1, 3).copy()
         results = self._contacts.Eval(context)
+        part_of = self._part_of_geometry.get
         for i in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(i)
             pair = info.point_pair()
-            f_B = info.contact_force()  # on body B, applied at the contact point
-            if pair.id_A in self._part_of_geometry:  # seat is A: force on the body is f_B
-                out[self._part_of_geometry[pair.id_A]] += f_B
-            elif pair.id_B in self._part_of_geometry:  # seat is B: body gets -f_B
-                out[self._part_of_geometry[pair.id_B]] -= f_B
+            part = part_of(pair.id_A)
+            if part is not None:  # seat is A: the force on the body is f_B
+                out[part] += info.contact_force()  # on body B, at the contact point
+            else:
+                part = part_of(pair.id_B)
+                if part is not None:  # seat is B: body gets -f_B
+                    out[part] -= info.contact_force()
         for i in range(results.num_hydroelastic_contacts()):
             info = results.hydroelastic_contact_info(i)
             surface = info.contact_surface()

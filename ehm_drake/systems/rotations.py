@@ -16,12 +16,20 @@ import numpy as np
 def rpy_from_rotation(R):
     """Roll, pitch, yaw of rotation matrix R, for |pitch| < 90 deg."""
     if R.dtype != object:
-        R = R.tolist()
-        return np.array([
-            math.atan2(R[2][1], R[2][2]),
-            math.atan2(-R[2][0], math.hypot(R[0][0], R[1][0])),
-            math.atan2(R[1][0], R[0][0]),
-        ])
+        return np.array(rpy_from_rotation_list(R.tolist()))
+    return _rpy_from_rotation_object(R)
+
+
+def rpy_from_rotation_list(R) -> list[float]:
+    """`rpy_from_rotation` of a float matrix given as nested lists."""
+    return [
+        math.atan2(R[2][1], R[2][2]),
+        math.atan2(-R[2][0], math.hypot(R[0][0], R[1][0])),
+        math.atan2(R[1][0], R[0][0]),
+    ]
+
+
+def _rpy_from_rotation_object(R):
     roll = np.arctan2(R[2, 1], R[2, 2])
     pitch = np.arctan2(-R[2, 0], np.sqrt(R[0, 0] * R[0, 0] + R[1, 0] * R[1, 0]))
     yaw = np.arctan2(R[1, 0], R[0, 0])

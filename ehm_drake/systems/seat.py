@@ -88,6 +88,162 @@ def restraint_block(vector: np.ndarray, name: str) -> np.ndarray:
     return np.asarray(vector).reshape(nb, -1)[RESTRAINT_PARAMETERS.index(name)]
 
 
+def check_restraint_parameters(vector: np.ndarray, n: int) -> None:
+    """ValueError unless `vector` holds every block of `RESTRAINT_PARAMETERS`
+    for `n` points."""
+    if np.asarray(vector).size != len(RESTRAINT_PARAMETERS) * n:
+        raise ValueError(f"restraint parameters: expected {len(RESTRAINT_PARAMETERS)} "
+                         f"blocks of {n}, got {np.asarray(vector).size} values")
+
+
+class RestraintGeometry:
+    """The restraint points' fixed geometry, for the vectorized force law
+    (`ShearRestraints`, `ehm_drake.systems.forces.ForceLaws`): the points
+    grouped per body (one Jacobian per body), the projections of the
+    stacked point vectors (3n) onto the tangential axes (2n) and the
+    normals (n), in point order and body by body, and the sum of the point
+    forces per seat part.  `plant`: the plant (of the system's scalar type)
+    whose kinematics `kinematics` evaluates."""
+
+    def __init__(self, plant, points):
+        self.points = list(points)
+        n = len(points)
+        self.n = n
+        # Points grouped per body: (frame, 3xk points, rows in the list).
+        groups = {}
+        for i, pt in enumerate(points):
+            groups.setdefault(pt.body, []).append(i)
+        self.groups = [(plant.GetBodyByName(b).body_frame(),
+                        np.array([points[i].p_BP for i in rows]).T, rows)
+                       for b, rows in groups.items()]
+        self.order = np.concatenate([rows for _, _, rows in self.groups])
+        self.p_SA = np.array([pt.p_SA for pt in points])
+        A = np.zeros((2 * n, 3 * n))
+        Nm = np.zeros((n, 3 * n))
+        for i, pt in enumerate(points):
+            A[2 * i:2 * i + 2, 3 * i:3 * i + 3] = pt.axes
+            Nm[i, 3 * i:3 * i + 3] = pt.normal
+        self.A, self.N = A, Nm
+        # The same for points stacked body by body, and the anchor terms.
+        perm = (3 * self.order[:, None] + np.arange(3)).reshape(-1)
+        self.A_grouped, self.N_grouped = A[:, perm], Nm[:, perm]
+        self.a0, self.n0 = A @ self.p_SA.reshape(-1), Nm @ self.p_SA.reshape(-1)
+        self.face = np.array([pt.face_offset for pt in points])
+        self.part_of = np.array([SEAT_PART_NAMES.index(pt.part) for pt in points])
+        # Sum of point forces per seat part: (12, 3n).
+        P = np.zeros((3 * len(SEAT_PART_NAMES), 3 * n))
+        for i, k in enumerate(self.part_of):
+            P[3 * k:3 * k + 3, 3 * i:3 * i + 3] = np.eye(3)
+        self.sum_parts = P
+        self.axis_of = np.repeat(np.arange(n), 2)
+        self.world = plant.world_frame()
+
+    def kinematics(self, plant, context, v):
+        """Stacked point Jacobian J (3n x nv, rows body by body);
+        displacement and velocity along the tangential axes (2n each) and
+        the normals (n each); the points' positions and velocities in point
+        order (n x 3), at the plant `context` with generalized velocities
+        `v`."""
+        kv = JacobianWrtVariable.kV
+        world = self.world
+        pos = np.concatenate([plant.CalcPointsPositions(context, frame, P_B, world).T.reshape(-1)
+                              for frame, P_B, _ in self.groups])
+        J = np.vstack([plant.CalcJacobianTranslationalVelocity(context, kv, frame, P_B, world,
+                                                               world)
+                       for frame, P_B, _ in self.groups])
+        vel = J @ v
+        # Rows are grouped per body; the projection matrices are permuted
+        # to match once at construction.
+        p_pts, v_pts = np.empty((self.n, 3), dtype=pos.dtype), np.empty((self.n, 3),
+                                                                        dtype=vel.dtype)
+        p_pts[self.order], v_pts[self.order] = pos.reshape(-1, 3), vel.reshape(-1, 3)
+        return (J, self.A_grouped @ pos - self.a0, self.A_grouped @ vel,
+                self.N_grouped @ pos - self.n0, self.N_grouped @ vel, p_pts, v_pts)
+
+
+def restraint_axis_parameters(vector, axis_of) -> dict:
+    """Per-axis stiffness, damping, force limit and slip threshold, and the
+    per-point normal terms, from a packed parameter vector (derived once per
+    parameter value, not every step)."""
+    g = vector.reshape(len(RESTRAINT_PARAMETERS), -1)
+    k, c, fmax = g[:3, axis_of]
+    gated = g[3] > 0.5
+    mu = g[8]
+    return {
+        "k": k, "c": c, "fmax": fmax, "gated": gated, "any_gated": bool(gated.any()),
+        "k3": g[4], "ref": g[5], "any_cubic": bool(np.any(g[4] != 0)),
+        "k_lin": g[6], "c_lin": g[7], "any_linear": bool(np.any(g[6:8] != 0)),
+        "mu": mu[axis_of], "k_contact": g[9][axis_of],
+        "any_friction": bool(np.any(mu > 0)),
+        "k_safe": np.where(k > 0, k, 1.0)}
+
+
+def in_contact(face, pos_n):
+    """True where the point penetrates its seat part."""
+    return np.asarray((face - pos_n) > 0, dtype=bool)
+
+
+def restraint_limits(prm: dict, face, pos_n):
+    """Force limit per axis: the restraint's own, and mu N with friction (N:
+    the contact's elastic normal force at the point)."""
+    fmax = prm["fmax"]
+    if prm["any_friction"]:
+        pen = np.repeat(np.maximum(face - pos_n, 0.0), 2)
+        fmu = prm["mu"] * prm["k_contact"] * pen
+        fmax = np.where(prm["mu"] > 0, np.minimum(fmax, fmu), fmax)
+    return fmax
+
+
+def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, contact_damping):
+    """(tangential force per axis (2n), normal force per point (n)): the
+    force-limited shear spring-damper beyond the slipped anchor (gated by
+    contact where asked), the extra normal forces about the reference
+    compression, and the explicit part of the contact damping
+    (`contact_damping`, per point, or None)."""
+    fmax = restraint_limits(prm, face, pos_n)
+    f = np.minimum(np.maximum(-prm["k"] * (pos - slip) - prm["c"] * vel, -fmax), fmax)
+    contact = None
+    if prm["any_gated"]:
+        contact = np.where(prm["gated"], in_contact(face, pos_n), True)
+        f = f * np.repeat(contact, 2)
+    fn = 0.0 * pos_n
+    if prm["any_cubic"] or prm["any_linear"]:
+        # About the reference compression, in contact only.
+        d = prm["ref"] - pos_n  # extra compression (m)
+        touching = in_contact(face, pos_n)
+        fn = (prm["k3"] * d * d * d + prm["k_lin"] * d - prm["c_lin"] * vel_n) * touching
+    if contact_damping is not None:
+        fn = fn - contact_damping * vel_n * in_contact(face, pos_n)
+    return f, fn
+
+
+def constraint_point_forces(constraints: RestraintConstraints, axis_of, p_pts, v_pts):
+    """The restraint constraints' force on each point (n x 3, in S) at the
+    step's start: -(k (d - L) + c ddot) along the unit vector from the
+    anchor, c the damping SAP applies at the step's end."""
+    c = constraints
+    r = p_pts[axis_of] - c.p_SQ
+    d = np.sqrt(np.sum(r * r, axis=1))
+    u = r / d[:, None]
+    d_dot = np.sum(u * v_pts[axis_of], axis=1)
+    f = -(c.stiffness * (d - c.length) + c.step_damping * d_dot)[:, None] * u
+    return f.reshape(len(p_pts), 2, 3).sum(axis=1)
+
+
+def slip_update(prm: dict, face, pos, pos_n, slip):
+    """The anchors' slip after a step: the elastic deflection may not exceed
+    fmax/k, beyond it the anchor slides; a gated point out of contact has
+    its anchor follow it (it re-attaches unloaded where the body touches
+    again)."""
+    limit = restraint_limits(prm, face, pos_n) / prm["k_safe"]
+    delta = pos - slip
+    new = slip + (delta - np.minimum(np.maximum(delta, -limit), limit))
+    if prm["any_gated"]:
+        free = np.repeat(prm["gated"] & ~in_contact(face, pos_n), 2)
+        new = np.where(free, pos, new)
+    return new
+
+
 @TemplateSystem.define("ShearRestraints_", T_list=SCALARS)
 def ShearRestraints_(T):
     class Impl(LeafSystem_[T]):
@@ -114,7 +270,9 @@ def ShearRestraints_(T):
         evaluated here at the step's start.  `contact_damping` (per point,
         N s/m): the explicit part of the contact pair's damping, applied
         along the normal while the point is in contact (reported in the
-        point and seat forces: it is part of the contact force)."""
+        point and seat forces: it is part of the contact force).  (The
+        implicit design's diagram uses `ForceLaws`, which applies this law
+        with the others in one system.)"""
 
         def _construct(self, plant, points, parameters, period, constraints=None,
                        contact_damping=None, converter=None):
@@ -128,40 +286,10 @@ def ShearRestraints_(T):
                                      and np.any(self._args[5]) else None)
             n = len(points)
             self._n = n
-            if self._args[2].size != len(RESTRAINT_PARAMETERS) * n:
-                raise ValueError(f"restraint parameters: expected {len(RESTRAINT_PARAMETERS)} "
-                                 f"blocks of {n}, got {self._args[2].size} values")
+            check_restraint_parameters(self._args[2], n)
             self._scratch = PlantScratch(plant, T)
             p = self._scratch.plant
-            # Points grouped per body: (frame, 3xk points, rows in the list).
-            groups = {}
-            for i, pt in enumerate(points):
-                groups.setdefault(pt.body, []).append(i)
-            self._groups = [(p.GetBodyByName(b).body_frame(),
-                             np.array([points[i].p_BP for i in rows]).T, rows)
-                            for b, rows in groups.items()]
-            self._order = np.concatenate([rows for _, _, rows in self._groups])
-            self._p_SA = np.array([pt.p_SA for pt in points])
-            # Projections of the stacked point vectors (3n) onto the tangential
-            # axes (2n) and the normals (n).
-            A = np.zeros((2 * n, 3 * n))
-            Nm = np.zeros((n, 3 * n))
-            for i, pt in enumerate(points):
-                A[2 * i:2 * i + 2, 3 * i:3 * i + 3] = pt.axes
-                Nm[i, 3 * i:3 * i + 3] = pt.normal
-            self._A, self._N = A, Nm
-            # The same for points stacked body by body, and the anchor terms.
-            perm = (3 * self._order[:, None] + np.arange(3)).reshape(-1)
-            self._A_grouped, self._N_grouped = A[:, perm], Nm[:, perm]
-            self._a0, self._n0 = A @ self._p_SA.reshape(-1), Nm @ self._p_SA.reshape(-1)
-            self._face = np.array([pt.face_offset for pt in points])
-            self._part_of = np.array([SEAT_PART_NAMES.index(pt.part) for pt in points])
-            # Sum of point forces per seat part: (12, 3n).
-            P = np.zeros((3 * len(SEAT_PART_NAMES), 3 * n))
-            for i, k in enumerate(self._part_of):
-                P[3 * k:3 * k + 3, 3 * i:3 * i + 3] = np.eye(3)
-            self._sum_parts = P
-            self._world = p.world_frame()
+            self._geometry = RestraintGeometry(p, points)
             self._nq, self._nv = p.num_positions(), p.num_velocities()
             self._state_port = self.DeclareVectorInputPort("state", self._nq + self._nv)
             self._param = self.DeclareNumericParameter(BasicVector_[T](self._args[2]))
@@ -188,7 +316,6 @@ def ShearRestraints_(T):
                 ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
                               calc=lambda context, value: value.set_value(
                                   self._calc_forces(context))))
-            self._axis_of = np.repeat(np.arange(n), 2)
             self._force_port = self.DeclareVectorOutputPort(
                 "point_forces", 3 * n, self._calc_point_forces)
             self.DeclareVectorOutputPort("generalized_force", self._nv, self._calc_force)
@@ -221,55 +348,14 @@ def ShearRestraints_(T):
             return self._kin.Eval(context)[3]
 
         def _calc_kinematics(self, context, value):
-            """Stacked point Jacobian J (3n x nv); displacement and velocity
-            along the tangential axes (2n each) and the normals (n each)."""
             x = self._state_port.Eval(context)
             ctx = self._scratch.set_state(x)
-            p = self._scratch.plant
-            kv = JacobianWrtVariable.kV
-            world = self._world
-            pos = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, world).T.reshape(-1)
-                                  for frame, P_B, _ in self._groups])
-            J = np.vstack([p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, world, world)
-                           for frame, P_B, _ in self._groups])
-            vel = J @ x[self._nq:]
-            # Rows are grouped per body; the projection matrices are permuted
-            # to match once at construction.  Also the points' positions and
-            # velocities in point order (n x 3).
-            p_pts, v_pts = np.empty((self._n, 3), dtype=pos.dtype), np.empty((self._n, 3),
-                                                                            dtype=vel.dtype)
-            p_pts[self._order], v_pts[self._order] = pos.reshape(-1, 3), vel.reshape(-1, 3)
-            value.set_value((J, self._A_grouped @ pos - self._a0, self._A_grouped @ vel,
-                             self._N_grouped @ pos - self._n0, self._N_grouped @ vel,
-                             p_pts, v_pts))
+            value.set_value(self._geometry.kinematics(self._scratch.plant, ctx, x[self._nq:]))
 
         def _calc_axis_params(self, context, value):
-            g = context.get_numeric_parameter(self._param).CopyToVector().reshape(
-                len(RESTRAINT_PARAMETERS), -1)
-            k, c, fmax = g[:3, self._axis_of]
-            gated = g[3] > 0.5
-            mu = g[8]
-            value.set_value({
-                "k": k, "c": c, "fmax": fmax, "gated": gated, "any_gated": bool(gated.any()),
-                "k3": g[4], "ref": g[5], "any_cubic": bool(np.any(g[4] != 0)),
-                "k_lin": g[6], "c_lin": g[7], "any_linear": bool(np.any(g[6:8] != 0)),
-                "mu": mu[self._axis_of], "k_contact": g[9][self._axis_of],
-                "any_friction": bool(np.any(mu > 0)),
-                "k_safe": np.where(k > 0, k, 1.0)})
-
-        def _in_contact(self, pos_n):
-            """True where the point penetrates its seat part."""
-            return np.asarray((self._face - pos_n) > 0, dtype=bool)
-
-        def _limits(self, prm, pos_n):
-            """Force limit per axis: the restraint's own, and mu N with
-            friction (N: the contact's elastic normal force at the point)."""
-            fmax = prm["fmax"]
-            if prm["any_friction"]:
-                pen = np.repeat(np.maximum(self._face - pos_n, 0.0), 2)
-                fmu = prm["mu"] * prm["k_contact"] * pen
-                fmax = np.where(prm["mu"] > 0, np.minimum(fmax, fmu), fmax)
-            return fmax
+            value.set_value(restraint_axis_parameters(
+                context.get_numeric_parameter(self._param).CopyToVector(),
+                self._geometry.axis_of))
 
         def _forces(self, context):
             """(tangential force per axis (2n), normal force per point (n))."""
@@ -277,52 +363,27 @@ def ShearRestraints_(T):
 
         def _calc_forces(self, context):
             _, pos, vel, pos_n, vel_n, _, _ = self._kin.Eval(context)
-            prm = self._axis_params.Eval(context)
-            slip = context.get_discrete_state(self._slip).CopyToVector()
-            fmax = self._limits(prm, pos_n)
-            f = np.minimum(np.maximum(-prm["k"] * (pos - slip) - prm["c"] * vel, -fmax), fmax)
-            contact = None
-            if prm["any_gated"]:
-                contact = np.where(prm["gated"], self._in_contact(pos_n), True)
-                f = f * np.repeat(contact, 2)
-            fn = 0.0 * pos_n
-            if prm["any_cubic"] or prm["any_linear"]:
-                # About the reference compression, in contact only.
-                d = prm["ref"] - pos_n  # extra compression (m)
-                touching = self._in_contact(pos_n)
-                fn = (prm["k3"] * d * d * d + prm["k_lin"] * d - prm["c_lin"] * vel_n) * touching
-            if self._contact_damping is not None:
-                fn = fn - self._contact_damping * vel_n * self._in_contact(pos_n)
-            return f, fn
-
-        def _constraint_force(self, context):
-            """The restraint constraints' force on each point (n x 3, in S)
-            at the step's start: -(k (d - L) + c ddot) along the unit vector
-            from the anchor, c the damping SAP applies at the step's end."""
-            c = self._constraints
-            _, _, _, _, _, p_pts, v_pts = self._kin.Eval(context)
-            axis_of = self._axis_of
-            r = p_pts[axis_of] - c.p_SQ
-            d = np.sqrt(np.sum(r * r, axis=1))
-            u = r / d[:, None]
-            d_dot = np.sum(u * v_pts[axis_of], axis=1)
-            f = -(c.stiffness * (d - c.length) + c.step_damping * d_dot)[:, None] * u
-            return f.reshape(self._n, 2, 3).sum(axis=1)
+            return restraint_law(self._axis_params.Eval(context), self._geometry.face, pos, vel,
+                                 pos_n, vel_n,
+                                 context.get_discrete_state(self._slip).CopyToVector(),
+                                 self._contact_damping)
 
         def _calc_point_forces(self, context, output):
             f, fn = self._forces(context)
-            output.SetFromVector(self._A.T @ f + self._N.T @ fn)
+            output.SetFromVector(self._geometry.A.T @ f + self._geometry.N.T @ fn)
 
         def _calc_force(self, context, output):
-            J = self._kin.Eval(context)[0]
+            kin = self._kin.Eval(context)
+            g = self._geometry
             f, fn = self._forces(context)
-            F = self._A_grouped.T @ f + self._N_grouped.T @ fn
+            F = g.A_grouped.T @ f + g.N_grouped.T @ fn
             if self._constraints is not None:  # the plant applies them
-                F = F - self._constraint_force(context)[self._order].reshape(-1)
-            output.SetFromVector(J.T @ F)
+                F = F - constraint_point_forces(self._constraints, g.axis_of, kin[5],
+                                                kin[6])[g.order].reshape(-1)
+            output.SetFromVector(kin[0].T @ F)
 
         def _calc_seat_forces(self, context, output):
-            output.SetFromVector(self._sum_parts @ self._force_port.Eval(context))
+            output.SetFromVector(self._geometry.sum_parts @ self._force_port.Eval(context))
 
         def _calc_normal(self, context, output):
             output.SetFromVector(self._kin.Eval(context)[3])
@@ -333,18 +394,9 @@ def ShearRestraints_(T):
 
         def _update(self, context, discrete_state):
             _, pos, _, pos_n, _, _, _ = self._kin.Eval(context)
-            prm = self._axis_params.Eval(context)
-            slip = context.get_discrete_state(self._slip).CopyToVector()
-            # The elastic deflection may not exceed fmax/k: the anchor slides.
-            limit = self._limits(prm, pos_n) / prm["k_safe"]
-            delta = pos - slip
-            new = slip + (delta - np.minimum(np.maximum(delta, -limit), limit))
-            if prm["any_gated"]:
-                # Out of contact the anchor follows the point: it re-attaches
-                # unloaded where the body touches again.
-                free = np.repeat(prm["gated"] & ~self._in_contact(pos_n), 2)
-                new = np.where(free, pos, new)
-            discrete_state.get_mutable_vector(self._slip).SetFromVector(new)
+            discrete_state.get_mutable_vector(self._slip).SetFromVector(slip_update(
+                self._axis_params.Eval(context), self._geometry.face, pos, pos_n,
+                context.get_discrete_state(self._slip).CopyToVector()))
 
     return Impl
 
