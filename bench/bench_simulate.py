@@ -37,8 +37,8 @@ def plant_only_real_time_factor(params, settled, duration: float = 5.0) -> float
     StateMap(closed).set(ctx, settled.state)
     for name in ("seat_acceleration", "seat_displacement"):
         closed.diagram.GetInputPort(name).FixValue(ctx, np.zeros(3))
-    adder = closed.diagram.GetSubsystemByName("generalized_force_sum")
-    tau = adder.get_output_port().Eval(adder.GetMyContextFromRoot(ctx)).copy()
+    tau = closed.plant.get_applied_generalized_force_input_port().Eval(
+        closed.plant_context(ctx)).copy()
     builder = DiagramBuilder()
     hp = add_seated_human(builder, params)
     diagram = builder.Build()

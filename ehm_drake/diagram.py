@@ -8,6 +8,11 @@
                  --> extensions' forces ---+
     plant --state--> body channels (+ seat displacement) --> "channels"
 
+That is the reference design.  On the implicit design one system,
+`ForceLaws` ("force_laws"), applies the five laws in one pass and feeds
+the plant directly (through the sum only when extensions add forces);
+`EhmDiagram.systems` holds its `LawView`s under the five names.
+
 `build_diagram(params, ...)` returns an `EhmDiagram` holding the Diagram and
 handles to every subsystem.  Without a signal, the diagram exports the
 input ports ``seat_acceleration`` and ``seat_displacement`` (3 each) so it
@@ -44,6 +49,7 @@ from .model.plant import HumanPlant, add_seated_human, passive_stiffness_vector,
 from .params import ModelParams, apply_variant
 from .signals import SeatSignal
 from .systems.excitation import SeatExcitation
+from .systems.forces import ForceLaws
 from .systems.his import HeadInSpace
 from .systems.joints import JointPid, PassiveJoints
 from .systems.outputs import (
@@ -192,39 +198,33 @@ def build_diagram(
         accel_out, disp_out = a_in.get_output_port(), d_in.get_output_port()
 
     state = plant.get_state_output_port()
-    # Joint torques: passive Cardan springs + PID.
-    k = passive_stiffness_vector(params, layout)
-    passive = builder.AddNamedSystem(
-        "passive_joints",
-        PassiveJoints(layout, k, np.zeros(len(k)), hp.implicit_passive, hp.damping_remainder))
-    gains = pid_vectors(params, layout)
-    pid = builder.AddNamedSystem(
-        "joint_pid",
-        JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
-                 np.zeros(layout.num_rotational), h, implicit_kp=hp.implicit_kp))
-    if pid.HasInputPort("plant_state"):  # the plant's PD actuators apply kp
-        builder.Connect(state, pid.GetInputPort("plant_state"))
-    # Seat: inertial load of the seat motion, shear restraints.
-    inertial = builder.AddNamedSystem("seat_inertial_load",
-                                      SeatInertialLoad(plant, [hp.human, hp.seat]))
-    builder.Connect(accel_out, inertial.GetInputPort("seat_acceleration"))
-    points = restraint_points(hp)
-    restraints = builder.AddNamedSystem(
-        "shear_restraints",
-        ShearRestraints(plant, points, _restraint_vector(params, points, extensions), h,
-                        hp.restraint_constraints, contact_explicit_damping(params, points)))
-    # Head-in-space control.
-    gain = 1.0 if params.his.enabled else 0.0
-    his = builder.AddNamedSystem(
-        "head_in_space",
-        HeadInSpace(plant, "head", "upper_torso", gain * np.array(params.his.kp),
-                    gain * np.array(params.his.kd)))
-    forces = [passive, pid, restraints, his, inertial]
-    # The extensions' force systems (their "state" input is connected below).
     parts = DiagramParts(builder, hp, params, h, state, accel_out, disp_out, sys)
+    if hp.design == "implicit":
+        # One system for the five laws (see `ForceLaws`); it reads the
+        # controllers' view of the body on its own input when that may
+        # differ from the plant state.
+        laws = builder.AddNamedSystem("force_laws", _force_laws(
+            hp, params, h, controller_input or _transforms_feedback(extensions)))
+        builder.Connect(accel_out, laws.GetInputPort("seat_acceleration"))
+        forces, controllers = [laws], ()
+        sys.update(laws.views)
+        sys["force_laws"] = laws
+        law_ports = {"joint_torques": laws.GetOutputPort("joint_torques"),
+                     "his_torque": laws.GetOutputPort("his_torque"),
+                     "restraint_seat_forces": laws.GetOutputPort("restraint_seat_forces"),
+                     "restraint_normal_displacement": laws.GetOutputPort("normal_displacement"),
+                     "restraint_deflection": laws.GetOutputPort("deflection")}
+    else:
+        forces, law_ports = _reference_force_systems(builder, hp, params, h, accel_out, sys)
+        controllers = (sys["joint_pid"], sys["head_in_space"])
+    # The extensions' force systems (their "state" input is connected below).
     for ext in extensions:
         forces += ext.add_force_systems(parts)
-    adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
+    applied = plant.get_applied_generalized_force_input_port()
+    if len(forces) > 1 or hp.design != "implicit":
+        adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
+        builder.Connect(adder.get_output_port(), applied)
+        applied = None
     # The controllers' view of the body: the plant state, as the extensions
     # transform it (e.g. delayed), or an exported input (the loop cut open).
     feedback = state
@@ -236,11 +236,11 @@ def build_diagram(
         for ext in extensions:
             feedback = ext.transform_feedback(parts, feedback)
     for i, s in enumerate(forces):
-        builder.Connect(feedback if s in (pid, his) else state, s.GetInputPort("state"))
-        builder.Connect(s.GetOutputPort("generalized_force"), adder.get_input_port(i))
-    builder.Connect(adder.get_output_port(), plant.get_applied_generalized_force_input_port())
-    sys.update(passive_joints=passive, joint_pid=pid, seat_inertial_load=inertial,
-               shear_restraints=restraints, head_in_space=his)
+        builder.Connect(feedback if s in controllers else state, s.GetInputPort("state"))
+        if s.HasInputPort("controller_state"):
+            builder.Connect(feedback, s.GetInputPort("controller_state"))
+        builder.Connect(s.GetOutputPort("generalized_force"),
+                        adder.get_input_port(i) if applied is None else applied)
 
     # Measurements.
     channels = builder.AddNamedSystem("body_channels", BodyChannels(plant, _marker_list(hp)))
@@ -251,7 +251,7 @@ def build_diagram(
         forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
         builder.Connect(plant.get_contact_results_output_port(),
                         forces.GetInputPort("contact_results"))
-        builder.Connect(restraints.GetOutputPort("seat_forces"),
+        builder.Connect(law_ports["restraint_seat_forces"],
                         forces.GetInputPort("restraint_forces"))
         sys["seat_forces"] = forces
     if guard:
@@ -262,10 +262,10 @@ def build_diagram(
     outputs = {
         "channels": channels.GetOutputPort("channels"),
         "state": plant.get_state_output_port(),
-        "joint_torques": pid.GetOutputPort("torque"),
-        "his_torque": his.GetOutputPort("torque"),
-        "restraint_normal_displacement": restraints.GetOutputPort("normal_displacement"),
-        "restraint_deflection": restraints.GetOutputPort("deflection"),
+        "joint_torques": law_ports["joint_torques"],
+        "his_torque": law_ports["his_torque"],
+        "restraint_normal_displacement": law_ports["restraint_normal_displacement"],
+        "restraint_deflection": law_ports["restraint_deflection"],
         "seat_acceleration": accel_out,
         "seat_displacement": disp_out,
     }
@@ -291,6 +291,77 @@ def build_diagram(
     diagram = builder.Build()
     diagram.set_name("ehm_seated_human")
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
+
+
+def _reference_force_systems(builder, hp: HumanPlant, params: ModelParams, h: float, accel_out,
+                             sys: dict):
+    """The reference design's force systems, one per law (their ``state``
+    inputs connected by the caller), recorded in `sys`; returns them and
+    the ports of the joint and head-in-space torques and the restraints'
+    seat forces, normal displacements and deflections."""
+    layout, plant = hp.layout, hp.plant
+    # Joint torques: passive Cardan springs + PID.
+    k = passive_stiffness_vector(params, layout)
+    passive = builder.AddNamedSystem(
+        "passive_joints",
+        PassiveJoints(layout, k, np.zeros(len(k)), hp.implicit_passive, hp.damping_remainder))
+    gains = pid_vectors(params, layout)
+    pid = builder.AddNamedSystem(
+        "joint_pid",
+        JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
+                 np.zeros(layout.num_rotational), h, implicit_kp=hp.implicit_kp))
+    if pid.HasInputPort("plant_state"):  # the plant's PD actuators apply kp
+        builder.Connect(plant.get_state_output_port(), pid.GetInputPort("plant_state"))
+    # Seat: inertial load of the seat motion, shear restraints.
+    inertial = builder.AddNamedSystem("seat_inertial_load",
+                                      SeatInertialLoad(plant, [hp.human, hp.seat]))
+    builder.Connect(accel_out, inertial.GetInputPort("seat_acceleration"))
+    points = restraint_points(hp)
+    restraints = builder.AddNamedSystem(
+        "shear_restraints",
+        ShearRestraints(plant, points, _restraint_vector(params, points, hp.extensions), h,
+                        hp.restraint_constraints, contact_explicit_damping(params, points)))
+    # Head-in-space control.
+    gain = 1.0 if params.his.enabled else 0.0
+    his = builder.AddNamedSystem(
+        "head_in_space",
+        HeadInSpace(plant, "head", "upper_torso", gain * np.array(params.his.kp),
+                    gain * np.array(params.his.kd)))
+    sys.update(passive_joints=passive, joint_pid=pid, seat_inertial_load=inertial,
+               shear_restraints=restraints, head_in_space=his)
+    return [passive, pid, restraints, his, inertial], {
+        "joint_torques": pid.GetOutputPort("torque"),
+        "his_torque": his.GetOutputPort("torque"),
+        "restraint_seat_forces": restraints.GetOutputPort("seat_forces"),
+        "restraint_normal_displacement": restraints.GetOutputPort("normal_displacement"),
+        "restraint_deflection": restraints.GetOutputPort("deflection")}
+
+
+def _force_laws(hp: HumanPlant, params: ModelParams, h: float, feedback_input: bool):
+    """The implicit design's `ForceLaws`, with the same laws and parameters
+    as `_reference_force_systems` builds one by one."""
+    layout = hp.layout
+    k = passive_stiffness_vector(params, layout)
+    gains = pid_vectors(params, layout)
+    points = restraint_points(hp)
+    gain = 1.0 if params.his.enabled else 0.0
+    return ForceLaws(
+        hp.plant, layout,
+        passive=(k, np.zeros(len(k)), hp.implicit_passive, hp.damping_remainder),
+        pid=(gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
+             np.zeros(layout.num_rotational), hp.implicit_kp),
+        his=("head", "upper_torso", gain * np.array(params.his.kp),
+             gain * np.array(params.his.kd)),
+        restraints=(points, _restraint_vector(params, points, hp.extensions),
+                    hp.restraint_constraints, contact_explicit_damping(params, points)),
+        inertial_instances=[hp.human, hp.seat], period=h, feedback_input=feedback_input)
+
+
+def _transforms_feedback(extensions: tuple[ModelExtension, ...]) -> bool:
+    """Whether an extension may give the controllers another view of the
+    body than the plant state (it implements `transform_feedback`)."""
+    return any(type(ext).transform_feedback is not ModelExtension.transform_feedback
+               for ext in extensions)
 
 
 def _restraint_vector(params: ModelParams, points,

@@ -1,0 +1,435 @@
+"""`ForceLaws`: the implicit design's per-step force laws in one system.
+
+On the implicit design (`ehm_drake.model.stepping`) the plant's own step
+costs about 200 us at 5 ms, and five Python force systems summed by an
+Adder (passive joints, joint PID, head-in-space, shear restraints, seat
+inertial load) cost about as much again: each read the state, set up its
+kinematics, evaluated its ports and parameters, and the PID and the
+restraints each had an update event.  `ForceLaws` applies the same five
+laws in one pass (the functions it calls are those of the separate
+systems, `ehm_drake.systems.joints`, `.his`, `.seat`): the state, the
+parameters and the discrete states are read once per step, the
+kinematics set up once, the generalized forces summed into one output,
+and the PID integral and the restraints' slip advance in one update event.
+The laws are unchanged; the sum is ordered differently, so the forces
+differ from the five systems' sum by rounding only
+(`tests/test_force_laws.py` checks it to 1e-12 at random states).
+
+The parts keep their identities for the code that reads or changes them
+in a context (the static equilibrium, the gap diagnosis' families and
+extensions, tests): `ForceLaws.views` holds one `LawView` per former
+system, under its name (``passive_joints``, ``joint_pid``,
+``head_in_space``, ``shear_restraints``, ``seat_inertial_load``), with its
+parameter index, its discrete state index, its ports
+(``generalized_force``: that law's part alone, for tests and diagnosis)
+and the methods the former system had.  Each view's numeric parameter has
+that system's layout.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from ..model.plant import JointLayout
+from . import SCALARS, PlantScratch
+from .his import head_in_space_torque
+from .joints import PID_PARAMETERS, _BallIndex, passive_torque
+from .rotations import rotation_from_rpy
+from .seat import (
+    SEAT_PART_NAMES,
+    RestraintGeometry,
+    check_restraint_parameters,
+    constraint_point_forces,
+    restraint_axis_parameters,
+    restraint_law,
+    slip_update,
+)
+
+#: The former force systems, in the order their parts are reported.
+LAWS = ("passive_joints", "joint_pid", "head_in_space", "shear_restraints",
+        "seat_inertial_load")
+
+
+class LawView:
+    """One law of a `ForceLaws` system under its former system's name: its
+    context is the `ForceLaws` system's (`GetMyContextFromRoot`), its
+    ``generalized_force`` port that law's part alone, and its parameter
+    and state indices those of the law's own numeric parameter and
+    discrete state group (None where it has none)."""
+
+    def __init__(self, system, name: str, parameter_index=None, state_index=None,
+                 ports: dict | None = None):
+        self.system = system
+        self._name = name
+        self._parameter_index = parameter_index
+        self._state_index = state_index
+        self._ports = {"generalized_force": f"{name}_generalized_force", **(ports or {})}
+
+    def get_name(self) -> str:
+        return self._name
+
+    @property
+    def parameter_index(self):
+        return self._parameter_index
+
+    def GetMyContextFromRoot(self, root_context):  # noqa: N802  (Drake's name)
+        return self.system.GetMyContextFromRoot(root_context)
+
+    def GetMyMutableContextFromRoot(self, root_context):  # noqa: N802
+        return self.system.GetMyMutableContextFromRoot(root_context)
+
+    def HasOutputPort(self, name: str) -> bool:  # noqa: N802
+        return name in self._ports
+
+    def GetOutputPort(self, name: str):  # noqa: N802
+        if name not in self._ports:
+            raise RuntimeError(f"{self._name} (part of {self.system.get_name()}) has no output "
+                               f"port {name!r}; it has {', '.join(sorted(self._ports))}")
+        return self.system.GetOutputPort(self._ports[name])
+
+
+class PidView(LawView):
+    @property
+    def integral_state_index(self):
+        return self._state_index
+
+
+class RestraintView(LawView):
+    @property
+    def slip_state_index(self):
+        return self._state_index
+
+    @property
+    def points(self):
+        return self.system.restraint_points
+
+    def axis_deflection(self, context) -> np.ndarray:
+        """Displacement of each point from its anchor along each axis
+        (2n, m), before slip (`context`: the ForceLaws system's)."""
+        return self.system.restraint_kinematics(context)[1]
+
+    def normal_displacement(self, context) -> np.ndarray:
+        return self.system.restraint_kinematics(context)[3]
+
+
+class _Constants:
+    """What the laws derive from the numeric parameters, once per value."""
+
+    __slots__ = ("passive", "kp", "ki", "kd", "reference", "bound", "his_kp", "his_kd",
+                 "his_R_ref_T", "restraint")
+
+
+class _Step:
+    """The laws at one state: the generalized force and what the outputs
+    and the update read."""
+
+    __slots__ = ("x", "xf", "f", "pid_torque", "pid_force", "passive_force", "his_torque",
+                 "J_his", "f_t", "f_n", "kin", "F", "inertial")
+
+
+@TemplateSystem.define("ForceLaws_", T_list=SCALARS)
+def ForceLaws_(T):
+    class Impl(LeafSystem_[T]):
+        """Inputs ``state`` (plant [q; v]), ``seat_acceleration`` (3,
+        m/s^2) and, with `feedback_input`, ``controller_state`` (the plant
+        state as the PID and head-in-space controllers see it, e.g.
+        delayed; without it they read ``state``).
+
+        Outputs ``generalized_force`` (nv: the sum of the five laws),
+        ``joint_torques`` (the PID's torque per rotational DoF, N m),
+        ``his_torque`` (3, N m), ``restraint_seat_forces`` (the restraints'
+        force on the body per seat part, 12, N), ``point_forces``,
+        ``normal_displacement``, ``deflection`` (per restraint point, as
+        `ShearRestraints`), and ``<law>_generalized_force`` per law.
+
+        Numeric parameters (one per law, each in its former system's
+        layout): passive stiffness and neutral positions
+        (`PassiveJoints`), PID gains (`JointPid`, `PID_PARAMETERS`),
+        head-in-space gains and reference (`HeadInSpace`), the packed
+        restraint vector (`ShearRestraints`).  Discrete states: the PID
+        integral and the restraints' slip, advanced every `period` s.
+
+        Arguments: `layout` (`HumanPlant.layout`); `passive` = (stiffness,
+        neutral, implicit part, damping remainder) as `PassiveJoints`
+        takes them; `pid` = (kp, ki, kd, integral_limit, reference,
+        implicit kp) as `JointPid`; `his` = (head body, trunk body, kp, kd)
+        as `HeadInSpace`; `restraints` = (points, packed parameters,
+        constraints, contact damping) as `ShearRestraints`;
+        `inertial_instances`: the model instances that feel the seat's
+        acceleration (`SeatInertialLoad`).  The PID's derivative is the
+        plant's joint damping (it is reported in ``joint_torques``).
+        """
+
+        def _construct(self, plant, layout: JointLayout, passive, pid, his, restraints,
+                       inertial_instances, period: float, feedback_input: bool = False,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._args = (plant, layout, passive, pid, his, restraints, inertial_instances,
+                          float(period), bool(feedback_input))
+            self._layout = L = layout
+            self._period = float(period)
+            self._scratch = PlantScratch(plant, T)
+            p = self._scratch.plant
+            nq, nv = p.num_positions(), p.num_velocities()
+            assert (nq, nv) == (L.nq, L.nv)
+            self._nq, self._nv = nq, nv
+            n_rot = L.num_rotational
+            self._world = p.world_frame()
+            self._ball = _BallIndex(L)
+
+            # Passive joints.
+            stiffness, neutral, implicit, damping = passive
+            k_init = np.concatenate([np.asarray(stiffness, float), np.asarray(neutral, float)])
+            assert k_init.shape == (2 * (n_rot + 1),)
+            self._implicit = (None if implicit is None or not np.any(implicit)
+                              else np.asarray(implicit, float))
+            self._damping = (None if damping is None or not np.any(damping)
+                             else np.asarray(damping, float))
+            assert self._damping is None or self._damping.shape == (n_rot + 1,)
+            self._q_index = np.append(L.rot_q, L.spine_q)
+            self._v_index = np.append(L.rot_v, L.spine_v)
+            self._rot_v_x = nq + L.rot_v  # the rotational velocities in [q; v]
+            self._spine_v_x = nq + L.spine_v
+
+            # Joint PID.
+            *gains, implicit_kp = pid
+            gains = [np.asarray(a, float) for a in gains]
+            assert len(gains) == len(PID_PARAMETERS) and all(a.shape == (n_rot,) for a in gains)
+            self._implicit_kp = (None if implicit_kp is None or not np.any(implicit_kp)
+                                 else np.asarray(implicit_kp, float))
+
+            # Head-in-space.
+            head, trunk, his_kp, his_kd = his
+            his_init = np.concatenate([np.asarray(his_kp, float), np.asarray(his_kd, float),
+                                       np.zeros(3)])
+            self._head_body = p.GetBodyByName(head)
+            self._head, self._trunk = self._head_body.body_frame(), \
+                p.GetBodyByName(trunk).body_frame()
+
+            # Shear restraints.
+            points, r_params, constraints, contact_damping = restraints
+            r_params = np.asarray(r_params, float)
+            check_restraint_parameters(r_params, len(points))
+            self._points = list(points)
+            self._geometry = g = RestraintGeometry(p, points)
+            self._constraints = constraints
+            self._contact_damping = (None if contact_damping is None
+                                     or not np.any(contact_damping)
+                                     else np.asarray(contact_damping, float))
+            # The restraints' force per seat part straight from the law's
+            # axis and normal forces.
+            self._seat_t, self._seat_n = g.sum_parts @ g.A.T, g.sum_parts @ g.N.T
+
+            # Seat inertial load.
+            self._instances = list(inertial_instances)
+            self._mass = p.CalcTotalMass(self._scratch.context, self._instances)
+
+            # Ports, parameters, states.
+            self._state_port = self.DeclareVectorInputPort("state", nq + nv)
+            self._feedback_port = (self.DeclareVectorInputPort("controller_state", nq + nv)
+                                   if feedback_input else None)
+            self._a_port = self.DeclareVectorInputPort("seat_acceleration", 3)
+            self._passive_param = self.DeclareNumericParameter(BasicVector_[T](k_init))
+            self._pid_param = self.DeclareNumericParameter(
+                BasicVector_[T](np.concatenate(gains)))
+            self._his_param = self.DeclareNumericParameter(BasicVector_[T](his_init))
+            self._restraint_param = self.DeclareNumericParameter(BasicVector_[T](r_params))
+            self._z = self.DeclareDiscreteState(n_rot)
+            self._slip = self.DeclareDiscreteState(2 * len(points))
+            self.DeclarePeriodicDiscreteUpdateEvent(self._period, 0.0, self._update)
+            self._constants = self.DeclareCacheEntry(
+                "constants of the laws",
+                ValueProducer(allocate=lambda: AbstractValue.Make(None),
+                              calc=self._calc_constants),
+                prerequisites_of_calc={self.all_parameters_ticket()})
+            # Everything at one state, once per step for the plant's input,
+            # the logged outputs and the update.
+            self._step = self.DeclareCacheEntry(
+                "the laws at this state",
+                ValueProducer(allocate=lambda: AbstractValue.Make(None), calc=self._calc_step))
+            n = len(points)
+            for name, size, calc in (
+                    ("generalized_force", nv, self._out_force),
+                    ("joint_torques", n_rot, self._out_pid_torque),
+                    ("his_torque", 3, self._out_his_torque),
+                    ("restraint_seat_forces", 3 * len(SEAT_PART_NAMES), self._out_seat_forces),
+                    ("point_forces", 3 * n, self._out_point_forces),
+                    ("normal_displacement", n, self._out_normal),
+                    ("deflection", 2 * n, self._out_deflection)):
+                self.DeclareVectorOutputPort(name, size, calc)
+            for law in LAWS:
+                self.DeclareVectorOutputPort(f"{law}_generalized_force", nv,
+                                             self._law_output(law))
+            self.views = {
+                "passive_joints": LawView(self, "passive_joints", self._passive_param),
+                "joint_pid": PidView(self, "joint_pid", self._pid_param, self._z,
+                                     {"torque": "joint_torques"}),
+                "head_in_space": LawView(self, "head_in_space", self._his_param,
+                                         ports={"torque": "his_torque"}),
+                "shear_restraints": RestraintView(
+                    self, "shear_restraints", self._restraint_param, self._slip,
+                    {"seat_forces": "restraint_seat_forces", "point_forces": "point_forces",
+                     "normal_displacement": "normal_displacement",
+                     "deflection": "deflection"}),
+                "seat_inertial_load": LawView(self, "seat_inertial_load"),
+            }
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, *other._args, converter=converter)
+
+        # -- what other code reads ----------------------------------------------------
+
+        def discrete_state_view(self, group: int) -> LawView:
+            """The law whose discrete state is group `group` (see
+            `ehm_drake.simulation.StateMap`)."""
+            return self.views["joint_pid" if group == self._z else "shear_restraints"]
+
+        @property
+        def restraint_points(self):
+            return self._points
+
+        def restraint_kinematics(self, context):
+            """The restraint kinematics at the context's state (see
+            `RestraintGeometry.kinematics`)."""
+            return self._step.Eval(context).kin
+
+        # -- the laws -----------------------------------------------------------------
+
+        def _calc_constants(self, context, value):
+            c = _Constants()
+            c.passive = context.get_numeric_parameter(self._passive_param).CopyToVector()
+            n = self._layout.num_rotational
+            g = context.get_numeric_parameter(self._pid_param).CopyToVector()
+            c.kp, c.ki, c.kd, limit, c.reference = (g[i * n:(i + 1) * n] for i in range(5))
+            # |ki z| <= limit; a joint without integral action keeps z = 0.
+            c.bound = limit / np.where(c.ki > 0, c.ki, np.inf)
+            h = context.get_numeric_parameter(self._his_param).CopyToVector()
+            c.his_kp, c.his_kd, c.his_R_ref_T = h[0:3], h[3:6], rotation_from_rpy(h[6:9]).T
+            c.restraint = restraint_axis_parameters(
+                context.get_numeric_parameter(self._restraint_param).CopyToVector(),
+                self._geometry.axis_of)
+            value.set_value(c)
+
+        def _his_kinematics(self, x):
+            ctx = self._scratch.set_state(x)
+            p = self._scratch.plant
+            kv = JacobianWrtVariable.kV
+            w = self._world
+            J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, w, w)
+            return (p.EvalBodyPoseInWorld(ctx, self._head_body).rotation().matrix(), J_head,
+                    J_head - p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, w, w))
+
+        def _calc_step(self, context, value):
+            s = _Step()
+            c = self._constants.Eval(context)
+            x = s.x = self._state_port.Eval(context)
+            xf = s.xf = x if self._feedback_port is None else self._feedback_port.Eval(context)
+            a = self._a_port.Eval(context)
+            L = self._layout
+            nq = self._nq
+            # Head-in-space on the controllers' view of the body (first: the
+            # scratch context then moves to the plant state, as the other
+            # systems need it).
+            R_WH, J_head, s.J_his = self._his_kinematics(xf)
+            s.his_torque = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
+                                                J_head @ xf[nq:])
+            ctx = self._scratch.set_state(x)
+            p = self._scratch.plant
+            # Seat inertial load, -M J_com^T a.
+            J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(
+                ctx, self._instances, JacobianWrtVariable.kV, self._world, self._world)
+            s.inertial = -self._mass * (J_com.T @ a)
+            # Shear restraints: the law less the plant's constraints' part.
+            g = self._geometry
+            s.kin = J, pos, vel, pos_n, vel_n, p_pts, v_pts = g.kinematics(p, ctx, x[nq:])
+            slip = context.get_discrete_state(self._slip).get_value()
+            s.f_t, s.f_n = restraint_law(c.restraint, g.face, pos, vel, pos_n, vel_n, slip,
+                                         self._contact_damping)
+            F = g.A_grouped.T @ s.f_t + g.N_grouped.T @ s.f_n
+            if self._constraints is not None:  # the plant applies them
+                F = F - constraint_point_forces(self._constraints, g.axis_of, p_pts,
+                                                v_pts)[g.order].reshape(-1)
+            s.F = F
+            # Joint PID (its derivative is the plant's joint damping; the
+            # plant's PD actuators apply implicit_kp about 0).
+            z = context.get_discrete_state(self._z).get_value()
+            pi = c.kp * (xf[L.rot_q] - c.reference) + c.ki * z
+            s.pid_torque = -(pi + c.kd * xf[self._rot_v_x])
+            s.pid_force = -pi
+            if self._implicit_kp is not None:
+                s.pid_force = s.pid_force + self._implicit_kp * x[L.rot_q]
+            # Passive joints.
+            s.passive_force = passive_torque(c.passive, x[self._q_index], x[self._rot_v_x],
+                                             x[self._spine_v_x], self._ball, self._implicit,
+                                             self._damping)
+            # The sum.
+            f = s.inertial + J.T @ F + s.J_his.T @ s.his_torque
+            f[L.rot_v] += s.pid_force
+            f[self._v_index] += s.passive_force
+            s.f = f
+            value.set_value(s)
+
+        def _update(self, context, discrete_state):
+            s = self._step.Eval(context)
+            c = self._constants.Eval(context)
+            z = context.get_discrete_state(self._z).get_value()
+            discrete_state.get_mutable_vector(self._z).SetFromVector(np.minimum(np.maximum(
+                z + self._period * (s.xf[self._layout.rot_q] - c.reference), -c.bound),
+                c.bound))
+            _, pos, _, pos_n, _, _, _ = s.kin
+            discrete_state.get_mutable_vector(self._slip).SetFromVector(slip_update(
+                c.restraint, self._geometry.face, pos, pos_n,
+                context.get_discrete_state(self._slip).get_value()))
+
+        # -- outputs ------------------------------------------------------------------
+
+        def _out_force(self, context, output):
+            output.SetFromVector(self._step.Eval(context).f)
+
+        def _out_pid_torque(self, context, output):
+            output.SetFromVector(self._step.Eval(context).pid_torque)
+
+        def _out_his_torque(self, context, output):
+            output.SetFromVector(self._step.Eval(context).his_torque)
+
+        def _out_seat_forces(self, context, output):
+            s = self._step.Eval(context)
+            output.SetFromVector(self._seat_t @ s.f_t + self._seat_n @ s.f_n)
+
+        def _out_point_forces(self, context, output):
+            s = self._step.Eval(context)
+            output.SetFromVector(self._geometry.A.T @ s.f_t + self._geometry.N.T @ s.f_n)
+
+        def _out_normal(self, context, output):
+            output.SetFromVector(self._step.Eval(context).kin[3])
+
+        def _out_deflection(self, context, output):
+            output.SetFromVector(self._step.Eval(context).kin[1]
+                                 - context.get_discrete_state(self._slip).get_value())
+
+        def _law_output(self, law: str):
+            def calc(context, output):
+                s = self._step.Eval(context)
+                if law == "seat_inertial_load":
+                    f = s.inertial
+                elif law == "shear_restraints":
+                    f = s.kin[0].T @ s.F
+                elif law == "head_in_space":
+                    f = s.J_his.T @ s.his_torque
+                else:
+                    f = np.zeros(self._nv, dtype=s.f.dtype)
+                    if law == "joint_pid":
+                        f[self._layout.rot_v] = s.pid_force
+                    else:
+                        f[self._v_index] = s.passive_force
+                output.SetFromVector(f)
+            return calc
+
+    return Impl
+
+
+ForceLaws = ForceLaws_[None]

@@ -1,0 +1,294 @@
+"""`ForceLaws`: the implicit design's five force laws in one system.  It must
+be the five separate systems (passive joints, joint PID, head-in-space,
+shear restraints, seat inertial load) to rounding: the same generalized
+force, torques, seat forces and discrete updates at any state, for the
+paper's variants and with every optional branch of the restraint law; and
+it must keep the parts addressable under their old names."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.systems.framework import BasicVector, DiagramBuilder
+from pydrake.systems.primitives import PassThrough
+
+from ehm_drake.diagram import _force_laws, _reference_force_systems, build_diagram
+from ehm_drake.model.plant import add_seated_human
+from ehm_drake.params import apply_variant, load_params, reference_design
+from ehm_drake.simulation import StateMap, static_equilibrium
+from ehm_drake.systems.forces import LAWS, LawView
+from ehm_drake.systems.rotations import rotation_from_rpy, rpy_from_rotation
+from ehm_drake.systems.seat import restraint_block
+
+#: Forces agree to this fraction of the largest force (rounding of a
+#: reordered sum of terms up to ~1e3 N).
+RTOL = 1e-12
+RESTRAINT_OUTPUTS = ("point_forces", "normal_displacement", "deflection")
+
+
+def implicit(h: float = 0.005):
+    p = load_params()
+    p.simulation.design = "implicit"
+    p.simulation.time_step_s = h
+    return p
+
+
+class Rig:
+    """The plant with both the five systems and `ForceLaws` on it, fed the
+    same plant state, controller state (an exported input, so it can
+    differ from the plant's, as under a feedback delay) and seat
+    acceleration."""
+
+    def __init__(self, params, variant="default"):
+        params = apply_variant(params, variant)
+        h = params.simulation.time_step_s
+        builder = DiagramBuilder()
+        self.hp = hp = add_seated_human(builder, params)
+        accel = builder.AddSystem(PassThrough(3))
+        feedback = builder.AddSystem(PassThrough(hp.layout.nq + hp.layout.nv))
+        builder.ExportInput(accel.get_input_port(), "seat_acceleration")
+        builder.ExportInput(feedback.get_input_port(), "controller_state")
+        state = hp.plant.get_state_output_port()
+        self.old = {}
+        forces, _ = _reference_force_systems(builder, hp, params, h, accel.get_output_port(),
+                                             self.old)
+        for s in forces:
+            controller = s in (self.old["joint_pid"], self.old["head_in_space"])
+            builder.Connect(feedback.get_output_port() if controller else state,
+                            s.GetInputPort("state"))
+        self.laws = builder.AddSystem(_force_laws(hp, params, h, feedback_input=True))
+        builder.Connect(state, self.laws.GetInputPort("state"))
+        builder.Connect(feedback.get_output_port(), self.laws.GetInputPort("controller_state"))
+        builder.Connect(accel.get_output_port(), self.laws.GetInputPort("seat_acceleration"))
+        self.diagram = builder.Build()
+        self.ctx = self.diagram.CreateDefaultContext()
+        hp.plant.get_applied_generalized_force_input_port().FixValue(
+            hp.plant.GetMyMutableContextFromRoot(self.ctx), np.zeros(hp.layout.nv))
+        self.x0 = hp.plant.GetPositionsAndVelocities(hp.plant.CreateDefaultContext())
+
+    def sub(self, system):
+        return system.GetMyMutableContextFromRoot(self.ctx)
+
+    def randomize(self, rng, delayed: bool):
+        """A random state near the reference posture: plant state, the
+        controllers' view of it, seat acceleration, PID integral and slip
+        (the same in both implementations)."""
+        hp, L = self.hp, self.hp.layout
+        x = self.x0.copy()
+        x[L.rot_q] += rng.uniform(-0.1, 0.1, L.num_rotational)
+        x[L.spine_q] += rng.uniform(-3e-3, 3e-3)
+        x[:L.nq][~np.isin(np.arange(L.nq), np.append(L.rot_q, L.spine_q))] += \
+            rng.uniform(-5e-3, 5e-3, L.nq - L.num_rotational - 1)
+        x[L.nq:] = rng.normal(scale=0.3, size=L.nv)
+        hp.plant.SetPositionsAndVelocities(hp.plant.GetMyMutableContextFromRoot(self.ctx), x)
+        xf = x + (rng.normal(scale=0.01, size=x.shape) if delayed else 0.0)
+        self.diagram.GetInputPort("controller_state").FixValue(self.ctx, xf)
+        self.diagram.GetInputPort("seat_acceleration").FixValue(self.ctx,
+                                                                rng.normal(scale=0.5, size=3))
+        z = rng.normal(scale=0.05, size=L.num_rotational)
+        slip = rng.normal(scale=2e-3, size=2 * len(self.laws.restraint_points))
+        for system, index, value in (
+                (self.old["joint_pid"], self.old["joint_pid"].integral_state_index, z),
+                (self.laws, self.laws.views["joint_pid"].integral_state_index, z),
+                (self.old["shear_restraints"], self.old["shear_restraints"].slip_state_index,
+                 slip),
+                (self.laws, self.laws.views["shear_restraints"].slip_state_index, slip)):
+            self.sub(system).SetDiscreteState(index, value)
+
+    def set_restraint_parameters(self, change):
+        """Apply `change(vector)` to both implementations' packed restraint
+        parameters."""
+        for system, index in ((self.old["shear_restraints"],
+                               self.old["shear_restraints"].parameter_index),
+                              (self.laws, self.laws.views["shear_restraints"].parameter_index)):
+            prm = self.sub(system).get_mutable_numeric_parameter(index)
+            v = prm.CopyToVector()
+            change(v)
+            prm.SetFromVector(v)
+
+    def old_output(self, name, port="generalized_force"):
+        s = self.old[name]
+        return s.GetOutputPort(port).Eval(self.sub(s))
+
+    def new_output(self, port):
+        return self.laws.GetOutputPort(port).Eval(self.sub(self.laws))
+
+
+def _close(new, old, scale=None):
+    scale = np.max(np.abs(old)) if scale is None else scale
+    np.testing.assert_allclose(new, old, rtol=0, atol=RTOL * max(scale, 1e-300))
+
+
+def _compare(rig: Rig):
+    total_old = sum(rig.old_output(name) for name in LAWS)
+    scale = max(np.max(np.abs(rig.old_output(name))) for name in LAWS)
+    _close(rig.new_output("generalized_force"), total_old, scale)
+    for name in LAWS:
+        _close(rig.new_output(f"{name}_generalized_force"), rig.old_output(name), scale)
+    np.testing.assert_array_equal(rig.new_output("joint_torques"),
+                                  rig.old_output("joint_pid", "torque"))
+    _close(rig.new_output("his_torque"), rig.old_output("head_in_space", "torque"))
+    _close(rig.new_output("restraint_seat_forces"),
+           rig.old_output("shear_restraints", "seat_forces"))
+    for port in RESTRAINT_OUTPUTS:
+        _close(rig.new_output(port), rig.old_output("shear_restraints", port))
+    # The discrete update: PID integral and slip (and the plant's, equal).
+    update = rig.diagram.EvalUniquePeriodicDiscreteUpdate(rig.ctx)
+    smap = StateMap(rig.diagram)
+    x = np.concatenate([update.get_vector(g).CopyToVector()
+                        for g in range(update.num_groups())])
+    groups = {}
+    for owner, size, start in zip(smap.systems, smap.sizes, smap.offsets, strict=False):
+        groups[owner.get_name(), isinstance(owner, LawView)] = x[start:start + size]
+    for name in ("joint_pid", "shear_restraints"):
+        _close(groups[name, True], groups[name, False])
+
+
+@pytest.mark.parametrize(("design", "variant"), [
+    ("implicit", "default"), ("implicit", "no-integrator"), ("implicit", "high-stiffness"),
+    ("reference", "default")])
+def test_the_merged_laws_are_the_separate_systems(design, variant):
+    """At random states (and a controller view differing from the plant's,
+    as under a feedback delay) the generalized force is the five systems'
+    sum, each law's part its system's force, and torques, seat forces and
+    the updates of the PID integral and the slip theirs, to 1e-12 of the
+    largest force.  The high-stiffness variant has stiff springs as SAP PD
+    actuators (their part left out of both); the reference design's ball
+    joints take the Cardan mapping."""
+    params = implicit() if design == "implicit" else reference_design(load_params())
+    if variant == "high-stiffness" and design == "implicit":
+        with pytest.warns(UserWarning, match="beyond the second-order step"):
+            rig = Rig(params, variant)
+        assert rig.hp.implicit_kp is not None and np.any(rig.hp.implicit_kp)
+    else:
+        rig = Rig(params, variant)
+    rng = np.random.default_rng(11)
+    for i in range(12):
+        rig.randomize(rng, delayed=i % 2 == 1)
+        _compare(rig)
+
+
+def test_every_branch_of_the_restraint_law_agrees():
+    """Contact gating, cubic and linear normal forces, Coulomb friction and
+    a slipping anchor (deflection beyond the force limit) in both."""
+    rig = Rig(implicit())
+    n = len(rig.laws.restraint_points)
+    pads = np.array([p.part.endswith("pad") for p in rig.laws.restraint_points])
+
+    def change(v):
+        restraint_block(v, "contact_gated")[:] = pads
+        restraint_block(v, "normal_cubic_stiffness")[:] = 1e9
+        restraint_block(v, "normal_reference")[:] = -1e-3
+        restraint_block(v, "normal_linear_stiffness")[:] = np.linspace(0, 1e4, n)
+        restraint_block(v, "normal_linear_damping")[:] = 50.0
+        restraint_block(v, "friction_coefficient")[:] = np.where(pads, 0.0, 0.3)
+        restraint_block(v, "force_limit")[:] = 5.0  # small: anchors slip
+
+    rig.set_restraint_parameters(change)
+    rng = np.random.default_rng(5)
+    for i in range(8):
+        rig.randomize(rng, delayed=i % 2 == 1)
+        _compare(rig)
+
+
+def test_the_parts_keep_their_names_parameters_and_states():
+    """The implicit design's diagram has one force system, with its five
+    laws under their old names: their parameters in their old layouts, the
+    PID integral and the slip as state groups ``joint_pid`` and
+    ``shear_restraints``, and the plant fed without an Adder."""
+    model = build_diagram(implicit(), guard=False, seat_forces=False)
+    laws = model.systems["force_laws"]
+    assert not model.diagram.HasSubsystemNamed("generalized_force_sum")
+    assert {n: model.systems[n].system for n in LAWS} == {n: laws for n in LAWS}
+    smap = StateMap(model)
+    assert [s.get_name() for s in smap.systems] == ["plant", "joint_pid", "shear_restraints"]
+    ctx = model.diagram.CreateDefaultContext()
+    pid = model.systems["joint_pid"]
+    n = model.hp.layout.num_rotational
+    gains = pid.GetMyContextFromRoot(ctx).get_numeric_parameter(pid.parameter_index)
+    assert gains.size() == 5 * n
+    with pytest.raises(RuntimeError, match="joint_pid.*no output port 'seat_forces'"):
+        pid.GetOutputPort("seat_forces")
+    # Changing a part's parameter in the context changes that law.
+    model.diagram.GetInputPort("seat_acceleration").FixValue(ctx, np.zeros(3))
+    pc = model.plant_context(ctx)
+    q = model.plant.GetPositions(pc)
+    L = model.hp.layout
+    q[L.rot_q] += 0.01
+    model.plant.SetPositions(pc, q)
+    port = pid.GetOutputPort("generalized_force")
+    before = port.Eval(pid.GetMyContextFromRoot(ctx))[L.rot_v].copy()
+    prm = pid.GetMyMutableContextFromRoot(ctx).get_mutable_numeric_parameter(pid.parameter_index)
+    v = prm.CopyToVector()
+    v[:n] *= 2.0
+    prm.SetFromVector(v)
+    after = port.Eval(pid.GetMyContextFromRoot(ctx))[L.rot_v]
+    np.testing.assert_allclose(after, 2 * before, rtol=1e-12, atol=1e-12)
+
+
+def test_the_equilibrium_is_that_of_the_separate_systems():
+    """The static equilibrium of the implicit design (found through the
+    views: PID integral, restraint parameters, seating-in) is the one the
+    five separate systems give: the same body positions and integrals."""
+    params = implicit()
+    model = build_diagram(params, guard=False, seat_forces=False)
+    ctx, smap = static_equilibrium(model)
+    rig = Rig(params)
+    # The separate systems at that state: no net force, no integral change.
+    x = smap.get(ctx)
+    hp = rig.hp
+    hp.plant.SetPositionsAndVelocities(hp.plant.GetMyMutableContextFromRoot(rig.ctx),
+                                       x[smap.slice("plant")])
+    rig.diagram.GetInputPort("controller_state").FixValue(rig.ctx, x[smap.slice("plant")])
+    rig.diagram.GetInputPort("seat_acceleration").FixValue(rig.ctx, np.zeros(3))
+    for name, index in (("joint_pid", "integral_state_index"),
+                        ("shear_restraints", "slip_state_index")):
+        value = x[smap.slice(name)]
+        rig.sub(rig.old[name]).SetDiscreteState(getattr(rig.old[name], index), value)
+        rig.sub(rig.laws).SetDiscreteState(getattr(rig.laws.views[name], index), value)
+    for name in ("shear_restraints",):
+        prm = model.systems[name].GetMyContextFromRoot(ctx).get_numeric_parameter(
+            model.systems[name].parameter_index).CopyToVector()
+        rig.set_restraint_parameters(lambda v, prm=prm: v.__setitem__(slice(None), prm))
+    # Driven by the separate systems' forces, the body stays at rest.  (The
+    # force is fixed before anything is evaluated: re-fixing a subsystem's
+    # input leaves the diagram's cached update stale in Drake 1.51.)
+    hp.plant.get_applied_generalized_force_input_port().FixValue(
+        hp.plant.GetMyMutableContextFromRoot(rig.ctx), sum(rig.old_output(n) for n in LAWS))
+    _compare(rig)
+    update = rig.diagram.EvalUniquePeriodicDiscreteUpdate(rig.ctx)
+    v_next = update.get_vector(0).CopyToVector()[hp.layout.nq:]
+    assert np.max(np.abs(v_next)) < 1e-6  # m/s, rad/s
+
+
+@pytest.mark.parametrize("design", ["reference", "implicit"])
+def test_body_channels_are_bit_for_bit_the_per_marker_computation(design):
+    """The channels computed for all markers at once are exactly (not just
+    to rounding) those of the per-marker computation: the reference
+    design's outputs must not change by a bit."""
+    params = load_params() if design == "reference" else implicit()
+    model = build_diagram(params, guard=False, seat_forces=False)
+    channels = model.systems["body_channels"]
+    ctx = model.diagram.CreateDefaultContext()
+    cc = channels.GetMyMutableContextFromRoot(ctx)
+    pc = model.plant.GetMyMutableContextFromRoot(ctx)
+    x0 = model.plant.GetPositionsAndVelocities(pc)
+    model.diagram.GetInputPort("seat_acceleration").FixValue(ctx, np.zeros(3))
+    rng = np.random.default_rng(3)
+    out = BasicVector(30)
+    for _ in range(200):
+        x = x0 + rng.normal(scale=0.05, size=x0.shape)
+        model.plant.SetPositionsAndVelocities(pc, x)
+        settled = rng.normal(scale=0.1, size=30)
+        cc.get_mutable_numeric_parameter(channels.settled_pose_parameter_index).SetFromVector(
+            settled)
+        d = rng.normal(scale=0.01, size=3)
+        model.diagram.GetInputPort("seat_displacement").FixValue(ctx, d)
+        channels.GetOutputPort("channels").Eval(cc)  # (the port's own path)
+        channels._calc(cc, out)
+        ref = settled.reshape(-1, 6)
+        expected = np.concatenate([
+            np.concatenate([p - ref[i, :3] + d,
+                            rpy_from_rotation(R @ rotation_from_rpy(ref[i, 3:]).T)])
+            for i, (p, R) in enumerate(channels.marker_poses(x))])
+        assert np.array_equal(out.CopyToVector(), expected)
