@@ -1,14 +1,19 @@
-"""Where a time step of `simulate` goes: the cost of each force-producing
-system, of the whole discrete update (plant contact solve + controllers)
-and of the logged outputs (the plant's own step alone: the ceiling line of
-`bench_simulate.py`).
+"""Where a time step of `simulate` goes: the force systems (on the implicit
+design the one `ForceLaws` system, on the reference design each of the
+five and their sum), the whole discrete update (plant contact solve +
+forces + the controllers' updates) and the logged outputs.
 
     python bench/bench_step_parts.py [time_step_s [design]]
 
 Each figure is the best of five repeats of 400 evaluations at the settled
 state, the state nudged before every evaluation so no cached value is
-reused; one core.  The real-time factor at 1 ms is 1000 us divided by the
-per-step total (discrete update + framework + outputs at 200 Hz).
+reused; CPU time of this thread (so that other processes on the machine
+inflate it less than wall time); one core.  The figures are the cost of
+each part evaluated alone, with the plant's kinematics recomputed for it:
+in a run the systems share them (`ehm_drake.systems.PlantScratch`), and
+every Python part runs slower than here, after the contact solve has
+evicted its data from the CPU caches (`bench_simulate.py` gives the whole
+run).
 """
 
 from __future__ import annotations
@@ -23,8 +28,8 @@ from ehm_drake.diagram import build_diagram
 from ehm_drake.params import load_params
 from ehm_drake.simulation import StateMap, settle
 
-FORCE_SYSTEMS = ("passive_joints", "joint_pid", "shear_restraints", "head_in_space",
-                 "seat_inertial_load")
+REFERENCE_FORCE_SYSTEMS = ("passive_joints", "joint_pid", "shear_restraints", "head_in_space",
+                           "seat_inertial_load")
 
 
 def main() -> None:
@@ -44,16 +49,21 @@ def main() -> None:
     plant, pc = model.plant, model.plant.GetMyMutableContextFromRoot(ctx)
     x0 = plant.GetPositionsAndVelocities(pc)
 
-    def cost(f, n=400) -> float:
+    def cost(f, before=None, n=400) -> float:
+        """CPU us of f() at a fresh state (after `before()`, untimed)."""
         best = np.inf
         for _ in range(5):
-            t0 = time.perf_counter()
+            total = 0.0
             for i in range(n):
                 x = x0.copy()
                 x[-1] += 1e-9 * (i + 1)
                 plant.SetPositionsAndVelocities(pc, x)
+                if before is not None:
+                    before()
+                t0 = time.thread_time()
                 f()
-            best = min(best, (time.perf_counter() - t0) / n)
+                total += time.thread_time() - t0
+            best = min(best, total / n)
         return best * 1e6
 
     def port(name, port_name):
@@ -61,19 +71,33 @@ def main() -> None:
         sub, p = system.GetMyContextFromRoot(ctx), system.GetOutputPort(port_name)
         return lambda: p.Eval(sub)
 
-    base = cost(lambda: None)
-    print("per evaluation (us), at the settled state:")
-    for name in FORCE_SYSTEMS:
-        print(f"  {name:22s} {cost(port(name, 'generalized_force')) - base:7.1f}")
-    forces = cost(port("generalized_force_sum", "sum")) - base
-    print(f"  {'all forces (summed)':22s} {forces:7.1f}")
-    update = cost(lambda: model.diagram.EvalUniquePeriodicDiscreteUpdate(ctx)) - base
-    print(f"  {'whole discrete update':22s} {update:7.1f}  (contact solve + forces + PID and "
-          f"restraint updates)")
-    print(f"  {'body_channels (logged)':22s} {cost(port('body_channels', 'channels')) - base:7.1f}")
-    print(f"  {'seat_forces (logged)':22s} {cost(port('seat_forces', 'seat_forces')) - base:7.1f}"
-          "  (contact results at this state: the coming step's contact solve, which the step"
-          " then reuses from the cache; not an extra cost in a run)")
+    design = params.simulation.design
+    print(f"{design} design, time step {params.simulation.time_step_s * 1e3:g} ms; CPU us per "
+          "evaluation at the settled state:")
+    if design == "implicit":
+        forces = port("force_laws", "generalized_force")
+        print(f"  {'force_laws (5 laws)':26s} {cost(forces):7.1f}")
+    else:
+        for name in REFERENCE_FORCE_SYSTEMS:
+            print(f"  {name:26s} {cost(port(name, 'generalized_force')):7.1f}")
+        forces = port("generalized_force_sum", "sum")
+        print(f"  {'all forces (summed)':26s} {cost(forces):7.1f}")
+    update = lambda: model.diagram.EvalUniquePeriodicDiscreteUpdate(ctx)  # noqa: E731
+    print(f"  {'whole discrete update':26s} {cost(update):7.1f}  (contact solve + forces + PID "
+          "and restraint updates)")
+    print(f"  {'  of which the plant':26s} {cost(update, forces):7.1f}  (forces already "
+          "computed)")
+    contacts = lambda: plant.get_contact_results_output_port().Eval(pc)  # noqa: E731
+    print(f"  {'contact results (logged)':26s} {cost(contacts, update):7.1f}  (after the step's "
+          "contact solve, which they reuse)")
+    print(f"  {'seat_forces (logged)':26s} "
+          f"{cost(port('seat_forces', 'seat_forces'), lambda: (update(), contacts())):7.1f}"
+          "  (contact results and restraint forces computed)")
+    print(f"  {'body_channels (logged)':26s} {cost(port('body_channels', 'channels')):7.1f}")
+    guard = model.systems["divergence_guard"]
+    guard_ctx = guard.GetMyContextFromRoot(ctx)
+    print(f"  {'divergence_guard check':26s} {cost(lambda: guard._check(guard_ctx)):7.1f}"
+          "  (every 10 ms)")
     print("the plant's step alone: see bench_simulate.py (ceiling line)")
 
 

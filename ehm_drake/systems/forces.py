@@ -43,9 +43,9 @@ from .seat import (
     SEAT_PART_NAMES,
     RestraintGeometry,
     check_restraint_parameters,
-    constraint_point_forces,
     restraint_axis_parameters,
     restraint_law,
+    restraint_limits,
     slip_update,
 )
 
@@ -110,25 +110,25 @@ class RestraintView(LawView):
     def axis_deflection(self, context) -> np.ndarray:
         """Displacement of each point from its anchor along each axis
         (2n, m), before slip (`context`: the ForceLaws system's)."""
-        return self.system.restraint_kinematics(context)[1]
+        return self.system.restraint_displacements(context)[0]
 
     def normal_displacement(self, context) -> np.ndarray:
-        return self.system.restraint_kinematics(context)[3]
+        return self.system.restraint_displacements(context)[1]
 
 
 class _Constants:
     """What the laws derive from the numeric parameters, once per value."""
 
-    __slots__ = ("passive", "kp", "ki", "kd", "reference", "bound", "his_kp", "his_kd",
-                 "his_R_ref_T", "restraint")
+    __slots__ = ("passive", "neg_k", "neutral", "kp", "ki", "kd", "reference", "bound",
+                 "neg_bound", "his_kp", "his_kd", "his_R_ref_T", "restraint")
 
 
 class _Step:
     """The laws at one state: the generalized force and what the outputs
     and the update read."""
 
-    __slots__ = ("x", "xf", "f", "pid_torque", "pid_force", "passive_force", "his_torque",
-                 "J_his", "f_t", "f_n", "kin", "F", "inertial")
+    __slots__ = ("f", "J", "G", "pid_torque", "pid_force", "passive_force", "his_torque",
+                 "J_his", "f_t", "f_n", "pos", "pos_n", "F", "z_next", "slip_next")
 
 
 @TemplateSystem.define("ForceLaws_", T_list=SCALARS)
@@ -194,6 +194,8 @@ def ForceLaws_(T):
             self._v_index = np.append(L.rot_v, L.spine_v)
             self._rot_v_x = nq + L.rot_v  # the rotational velocities in [q; v]
             self._spine_v_x = nq + L.spine_v
+            self._v_x = nq + self._v_index
+            self._cardan_chains = not len(self._ball.roll)
 
             # Joint PID.
             *gains, implicit_kp = pid
@@ -223,6 +225,22 @@ def ForceLaws_(T):
             # The restraints' force per seat part straight from the law's
             # axis and normal forces.
             self._seat_t, self._seat_n = g.sum_parts @ g.A.T, g.sum_parts @ g.N.T
+            # Points stacked body by body ("grouped"): their displacements
+            # along the axes and normals, [A; N] p - [a0; n0], in one product.
+            n = g.n
+            self._M = np.vstack([g.A_grouped, g.N_grouped])
+            self._m0 = np.concatenate([g.a0, g.n0])
+            if constraints is not None:
+                # Per constraint (two per point, in point order): its point's
+                # grouped row, and the sum of a point's two constraint forces
+                # into the grouped force vector (3n x 6n).
+                grouped_row = np.empty(n, dtype=int)
+                grouped_row[g.order] = np.arange(n)
+                self._c_rows = grouped_row[g.axis_of]
+                Q = np.zeros((3 * n, 6 * n))
+                for j, row in enumerate(self._c_rows):
+                    Q[3 * row:3 * row + 3, 3 * j:3 * j + 3] = np.eye(3)
+                self._c_sum = Q
 
             # Seat inertial load.
             self._instances = list(inertial_instances)
@@ -292,10 +310,12 @@ def ForceLaws_(T):
         def restraint_points(self):
             return self._points
 
-        def restraint_kinematics(self, context):
-            """The restraint kinematics at the context's state (see
-            `RestraintGeometry.kinematics`)."""
-            return self._step.Eval(context).kin
+        def restraint_displacements(self, context):
+            """(displacement of each restraint point from its anchor along
+            each axis (2n), along the normal (n)) at the context's state (m;
+            see `RestraintGeometry.kinematics`)."""
+            step = self._step.Eval(context)
+            return step.pos, step.pos_n
 
         # -- the laws -----------------------------------------------------------------
 
@@ -303,10 +323,12 @@ def ForceLaws_(T):
             c = _Constants()
             c.passive = context.get_numeric_parameter(self._passive_param).CopyToVector()
             n = self._layout.num_rotational
+            c.neg_k, c.neutral = -c.passive[:n + 1], c.passive[n + 1:]
             g = context.get_numeric_parameter(self._pid_param).CopyToVector()
             c.kp, c.ki, c.kd, limit, c.reference = (g[i * n:(i + 1) * n] for i in range(5))
             # |ki z| <= limit; a joint without integral action keeps z = 0.
             c.bound = limit / np.where(c.ki > 0, c.ki, np.inf)
+            c.neg_bound = -c.bound
             h = context.get_numeric_parameter(self._his_param).CopyToVector()
             c.his_kp, c.his_kd, c.his_R_ref_T = h[0:3], h[3:6], rotation_from_rpy(h[6:9]).T
             c.restraint = restraint_axis_parameters(
@@ -314,60 +336,105 @@ def ForceLaws_(T):
                 self._geometry.axis_of)
             value.set_value(c)
 
-        def _his_kinematics(self, x):
-            ctx = self._scratch.set_state(x)
-            p = self._scratch.plant
-            kv = JacobianWrtVariable.kV
-            w = self._world
-            J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, w, w)
-            return (p.EvalBodyPoseInWorld(ctx, self._head_body).rotation().matrix(), J_head,
-                    J_head - p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, w, w))
-
         def _calc_step(self, context, value):
+            """The five laws at the context's state, with one Jacobian for
+            every point and body they act on (rows: the restraint points
+            body by body, head and upper-torso angular velocity, centre of
+            mass), so that all velocities are one product with v and the
+            generalized force one product with J^T."""
             s = _Step()
             c = self._constants.Eval(context)
-            x = s.x = self._state_port.Eval(context)
-            xf = s.xf = x if self._feedback_port is None else self._feedback_port.Eval(context)
-            a = self._a_port.Eval(context)
+            x = self._state_port.Eval(context)
+            xf = x if self._feedback_port is None else self._feedback_port.Eval(context)
             L = self._layout
             nq = self._nq
-            # Head-in-space on the controllers' view of the body (first: the
-            # scratch context then moves to the plant state, as the other
-            # systems need it).
-            R_WH, J_head, s.J_his = self._his_kinematics(xf)
-            s.his_torque = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
-                                                J_head @ xf[nq:])
-            ctx = self._scratch.set_state(x)
             p = self._scratch.plant
-            # Seat inertial load, -M J_com^T a.
-            J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(
-                ctx, self._instances, JacobianWrtVariable.kV, self._world, self._world)
-            s.inertial = -self._mass * (J_com.T @ a)
+            kv = JacobianWrtVariable.kV
+            W = self._world
+            if self._feedback_port is not None:
+                # Head-in-space on the controllers' view of the body first:
+                # the scratch context then moves to the plant state.
+                ctx = self._scratch.set_state(xf)
+                R_WH = p.EvalBodyPoseInWorld(ctx, self._head_body).rotation().matrix()
+                J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, W, W)
+                J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, W, W)
+            ctx = self._scratch.set_state(x)
+            if self._feedback_port is None:
+                R_WH = p.EvalBodyPoseInWorld(ctx, self._head_body).rotation().matrix()
+                J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, W, W)
+                J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, W, W)
+            groups = self._geometry.groups
+            s.J = J = np.vstack([
+                *(p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
+                  for frame, P_B, _ in groups),
+                J_head, J_trunk,
+                p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, self._instances, kv, W, W)])
+            P = np.hstack([p.CalcPointsPositions(ctx, frame, P_B, W) for frame, P_B, _ in groups])
+            V = J @ x[nq:]
+            n3 = 3 * len(self._points)
+            # Head-in-space.
+            w_WH = V[n3:n3 + 3] if self._feedback_port is None else J_head @ xf[nq:]
+            s.his_torque = tau = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
+                                                      w_WH)
+            s.J_his = J_head - J_trunk if self._feedback_port is not None else None
             # Shear restraints: the law less the plant's constraints' part.
-            g = self._geometry
-            s.kin = J, pos, vel, pos_n, vel_n, p_pts, v_pts = g.kinematics(p, ctx, x[nq:])
+            n2 = 2 * len(self._points)
+            PV = self._M @ P.ravel(order="F") - self._m0
+            VV = self._M @ V[:n3]
+            s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:]
             slip = context.get_discrete_state(self._slip).get_value()
-            s.f_t, s.f_n = restraint_law(c.restraint, g.face, pos, vel, pos_n, vel_n, slip,
-                                         self._contact_damping)
-            F = g.A_grouped.T @ s.f_t + g.N_grouped.T @ s.f_n
-            if self._constraints is not None:  # the plant applies them
-                F = F - constraint_point_forces(self._constraints, g.axis_of, p_pts,
-                                                v_pts)[g.order].reshape(-1)
+            face = self._geometry.face
+            fmax = restraint_limits(c.restraint, face, pos_n)
+            s.f_t, s.f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:], slip,
+                                         self._contact_damping, fmax)
+            F = self._M.T @ np.concatenate([s.f_t, s.f_n])
+            if self._constraints is not None:
+                # + the constraints' force at the step's start, s u (see
+                # `constraint_point_forces`), each point's two summed.
+                k = self._constraints
+                r = P.T[self._c_rows] - k.p_SQ
+                d = np.sqrt(np.add.reduce(r * r, axis=1))
+                u = r / d[:, None]
+                v_pts = V[:n3].reshape(-1, 3)[self._c_rows]
+                sc = k.stiffness * (d - k.length) + k.step_damping * np.add.reduce(u * v_pts,
+                                                                                  axis=1)
+                F = F + self._c_sum @ (sc[:, None] * u).reshape(-1)
             s.F = F
+            s.slip_next = slip_update(c.restraint, face, pos, pos_n, slip, fmax)
             # Joint PID (its derivative is the plant's joint damping; the
-            # plant's PD actuators apply implicit_kp about 0).
+            # plant's PD actuators apply implicit_kp about 0) and the update
+            # of its integral.
             z = context.get_discrete_state(self._z).get_value()
-            pi = c.kp * (xf[L.rot_q] - c.reference) + c.ki * z
+            e = xf[L.rot_q] - c.reference
+            pi = c.kp * e + c.ki * z
             s.pid_torque = -(pi + c.kd * xf[self._rot_v_x])
             s.pid_force = -pi
             if self._implicit_kp is not None:
                 s.pid_force = s.pid_force + self._implicit_kp * x[L.rot_q]
-            # Passive joints.
-            s.passive_force = passive_torque(c.passive, x[self._q_index], x[self._rot_v_x],
-                                             x[self._spine_v_x], self._ball, self._implicit,
-                                             self._damping)
-            # The sum.
-            f = s.inertial + J.T @ F + s.J_his.T @ s.his_torque
+            s.z_next = np.minimum(np.maximum(z + self._period * e, c.neg_bound), c.bound)
+            # Passive joints.  On Cardan chains (no ball joint) the Cardan
+            # rates are the generalized velocities and the torques the
+            # generalized forces: `passive_torque` in three products.
+            if self._cardan_chains:
+                q = x[self._q_index]
+                passive = c.neg_k * (q - c.neutral)
+                if self._implicit is not None:
+                    passive = passive + self._implicit * q
+                if self._damping is not None:
+                    passive = passive - self._damping * x[self._v_x]
+                s.passive_force = passive
+            else:
+                s.passive_force = passive_torque(c.passive, x[self._q_index], x[self._rot_v_x],
+                                                 x[self._spine_v_x], self._ball, self._implicit,
+                                                 self._damping)
+            # The sum: restraints, head-in-space (+tau on the head, -tau on
+            # the trunk), inertial load -m a at the centre of mass, joints.
+            s.G = np.concatenate([F, tau, -tau, -self._mass * self._a_port.Eval(context)])
+            if self._feedback_port is not None:  # head-in-space mapped at xf
+                s.G[n3:n3 + 6] = 0.0
+                f = J.T @ s.G + s.J_his.T @ tau
+            else:
+                f = J.T @ s.G
             f[L.rot_v] += s.pid_force
             f[self._v_index] += s.passive_force
             s.f = f
@@ -375,15 +442,8 @@ def ForceLaws_(T):
 
         def _update(self, context, discrete_state):
             s = self._step.Eval(context)
-            c = self._constants.Eval(context)
-            z = context.get_discrete_state(self._z).get_value()
-            discrete_state.get_mutable_vector(self._z).SetFromVector(np.minimum(np.maximum(
-                z + self._period * (s.xf[self._layout.rot_q] - c.reference), -c.bound),
-                c.bound))
-            _, pos, _, pos_n, _, _, _ = s.kin
-            discrete_state.get_mutable_vector(self._slip).SetFromVector(slip_update(
-                c.restraint, self._geometry.face, pos, pos_n,
-                context.get_discrete_state(self._slip).get_value()))
+            discrete_state.set_value(self._z, s.z_next)
+            discrete_state.set_value(self._slip, s.slip_next)
 
         # -- outputs ------------------------------------------------------------------
 
@@ -405,21 +465,23 @@ def ForceLaws_(T):
             output.SetFromVector(self._geometry.A.T @ s.f_t + self._geometry.N.T @ s.f_n)
 
         def _out_normal(self, context, output):
-            output.SetFromVector(self._step.Eval(context).kin[3])
+            output.SetFromVector(self._step.Eval(context).pos_n)
 
         def _out_deflection(self, context, output):
-            output.SetFromVector(self._step.Eval(context).kin[1]
+            output.SetFromVector(self._step.Eval(context).pos
                                  - context.get_discrete_state(self._slip).get_value())
 
         def _law_output(self, law: str):
+            n3 = 3 * len(self._points)
+            rows = {"shear_restraints": slice(0, n3), "head_in_space": slice(n3, n3 + 6),
+                    "seat_inertial_load": slice(n3 + 6, n3 + 9)}.get(law)
+
             def calc(context, output):
                 s = self._step.Eval(context)
-                if law == "seat_inertial_load":
-                    f = s.inertial
-                elif law == "shear_restraints":
-                    f = s.kin[0].T @ s.F
-                elif law == "head_in_space":
-                    f = s.J_his.T @ s.his_torque
+                if rows is not None:
+                    f = s.J[rows].T @ s.G[rows]
+                    if law == "head_in_space" and s.J_his is not None:
+                        f = s.J_his.T @ s.his_torque
                 else:
                     f = np.zeros(self._nv, dtype=s.f.dtype)
                     if law == "joint_pid":

@@ -161,13 +161,16 @@ class SeatForces(LeafSystem):
         for i in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(i)
             pair = info.point_pair()
-            part = part_of(pair.id_A)
-            if part is not None:  # seat is A: the force on the body is f_B
-                out[part] += info.contact_force()  # on body B, at the contact point
+            # The seat parts are geometries of one body, which Drake never
+            # pairs with each other: at most one of A, B is a seat part.
+            # (B first: it is the seat in the contacts Drake reports here.)
+            part = part_of(pair.id_B)
+            if part is not None:  # seat is B: body gets -f_B
+                out[part] -= info.contact_force()  # on body B, at the contact point
             else:
-                part = part_of(pair.id_B)
-                if part is not None:  # seat is B: body gets -f_B
-                    out[part] -= info.contact_force()
+                part = part_of(pair.id_A)
+                if part is not None:  # seat is A: the force on the body is f_B
+                    out[part] += info.contact_force()
         for i in range(results.num_hydroelastic_contacts()):
             info = results.hydroelastic_contact_info(i)
             surface = info.contact_surface()
@@ -202,7 +205,9 @@ class DivergenceGuard(LeafSystem):
     def __init__(self, hp, period: float = 0.01):
         super().__init__()
         self._hp = hp
-        self._plant_context = hp.plant.CreateDefaultContext()
+        # The plant's kinematics at the state are usually computed already
+        # for the force and measurement systems (`PlantScratch`).
+        self._scratch = PlantScratch(hp.plant, float)
         plant = hp.plant
         self._state = self.DeclareVectorInputPort(
             "state", plant.num_positions() + plant.num_velocities())
@@ -239,14 +244,13 @@ class DivergenceGuard(LeafSystem):
     def _check(self, context):
         x = self._state.Eval(context)
         t = context.get_time()
-        plant, ctx = self._hp.plant, self._plant_context
-        nq = plant.num_positions()
-        bad = np.flatnonzero(~np.isfinite(x))
-        if len(bad):
-            i = int(bad[0])
+        plant = self._hp.plant
+        if not np.isfinite(x).all():
+            nq = plant.num_positions()
+            i = int(np.flatnonzero(~np.isfinite(x))[0])
             owner = self._q_owner.get(i) if i < nq else self._v_owner.get(i - nq)
             raise SimulationDiverged(t, owner or "?", "state became NaN/inf")
-        plant.SetPositionsAndVelocities(ctx, x)
+        ctx = self._scratch.set_state(x)
         ke = plant.CalcKineticEnergy(ctx)
         if ke > self.MAX_KINETIC_ENERGY_J:
             raise SimulationDiverged(
@@ -257,7 +261,7 @@ class DivergenceGuard(LeafSystem):
                 t, "pelvis", f"fell through the seat pan (height {x[self._pelvis_z]:.3f} m)")
         L = self._layout
         dev = np.abs(x[L.rot_q] - self._reference)
-        if np.max(dev) > self.MAX_JOINT_ANGLE_RAD:
+        if dev.max() > self.MAX_JOINT_ANGLE_RAD:
             i = int(np.argmax(dev))
             raise SimulationDiverged(
                 t, self._q_owner[int(L.rot_q[i])],

@@ -194,13 +194,14 @@ def restraint_limits(prm: dict, face, pos_n):
     return fmax
 
 
-def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, contact_damping):
+def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, contact_damping, fmax=None):
     """(tangential force per axis (2n), normal force per point (n)): the
     force-limited shear spring-damper beyond the slipped anchor (gated by
     contact where asked), the extra normal forces about the reference
     compression, and the explicit part of the contact damping
-    (`contact_damping`, per point, or None)."""
-    fmax = restraint_limits(prm, face, pos_n)
+    (`contact_damping`, per point, or None).  `fmax`: the force limits
+    (`restraint_limits`) if already computed."""
+    fmax = restraint_limits(prm, face, pos_n) if fmax is None else fmax
     f = np.minimum(np.maximum(-prm["k"] * (pos - slip) - prm["c"] * vel, -fmax), fmax)
     contact = None
     if prm["any_gated"]:
@@ -230,12 +231,12 @@ def constraint_point_forces(constraints: RestraintConstraints, axis_of, p_pts, v
     return f.reshape(len(p_pts), 2, 3).sum(axis=1)
 
 
-def slip_update(prm: dict, face, pos, pos_n, slip):
+def slip_update(prm: dict, face, pos, pos_n, slip, fmax=None):
     """The anchors' slip after a step: the elastic deflection may not exceed
     fmax/k, beyond it the anchor slides; a gated point out of contact has
     its anchor follow it (it re-attaches unloaded where the body touches
-    again)."""
-    limit = restraint_limits(prm, face, pos_n) / prm["k_safe"]
+    again).  `fmax` as for `restraint_law`."""
+    limit = (restraint_limits(prm, face, pos_n) if fmax is None else fmax) / prm["k_safe"]
     delta = pos - slip
     new = slip + (delta - np.minimum(np.maximum(delta, -limit), limit))
     if prm["any_gated"]:
