@@ -292,3 +292,34 @@ def test_body_channels_are_bit_for_bit_the_per_marker_computation(design):
                             rpy_from_rotation(R @ rotation_from_rpy(ref[i, 3:]).T)])
             for i, (p, R) in enumerate(channels.marker_poses(x))])
         assert np.array_equal(out.CopyToVector(), expected)
+
+
+def test_a_parameter_written_after_reading_the_displacements_takes_effect():
+    """Code that takes a mutable parameter (or state) reference, reads the
+    restraint displacements and then writes through the reference (the
+    equilibrium's seating-in and normal reference, the gap families'
+    equivalent directions) gets the law with what it wrote: reading the
+    displacements caches nothing that depends on the parameters."""
+    model = build_diagram(implicit(), guard=False, seat_forces=False)
+    view = model.systems["shear_restraints"]
+
+    def restraint_force(write_after_read: bool):
+        ctx = model.diagram.CreateDefaultContext()
+        for port in ("seat_acceleration", "seat_displacement"):
+            model.diagram.GetInputPort(port).FixValue(ctx, np.zeros(3))
+        pc = model.plant_context(ctx)
+        q = model.plant.GetPositions(pc)
+        q[model.hp.layout.nq - 1] -= 1e-3  # (any motion against the anchors)
+        model.plant.SetPositions(pc, q)
+        rctx = view.GetMyMutableContextFromRoot(ctx)
+        view.GetOutputPort("generalized_force").Eval(rctx)  # everything cached
+        prm = rctx.get_mutable_numeric_parameter(view.parameter_index)
+        new = prm.CopyToVector()
+        restraint_block(new, "stiffness")[:] *= 2.0
+        if write_after_read:
+            view.axis_deflection(rctx)
+            view.normal_displacement(rctx)
+        prm.SetFromVector(new)
+        return view.GetOutputPort("generalized_force").Eval(rctx).copy()
+
+    np.testing.assert_array_equal(restraint_force(True), restraint_force(False))

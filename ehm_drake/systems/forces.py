@@ -269,6 +269,11 @@ def ForceLaws_(T):
             self._step = self.DeclareCacheEntry(
                 "the laws at this state",
                 ValueProducer(allocate=lambda: AbstractValue.Make(None), calc=self._calc_step))
+            self._displacements = self.DeclareCacheEntry(
+                "restraint displacements",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
+                              calc=self._calc_displacements),
+                prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())})
             n = len(points)
             for name, size, calc in (
                     ("generalized_force", nv, self._out_force),
@@ -313,9 +318,19 @@ def ForceLaws_(T):
         def restraint_displacements(self, context):
             """(displacement of each restraint point from its anchor along
             each axis (2n), along the normal (n)) at the context's state (m;
-            see `RestraintGeometry.kinematics`)."""
-            step = self._step.Eval(context)
-            return step.pos, step.pos_n
+            see `RestraintGeometry.kinematics`).  From a cache entry that
+            depends on the state input only, as `ShearRestraints`' did: code
+            that reads it between taking a mutable parameter or state
+            reference and writing through it (the equilibrium's seating-in,
+            the gap families' equivalent directions) leaves nothing cached
+            that depends on what it then writes."""
+            return self._displacements.Eval(context)
+
+        def _calc_displacements(self, context, value):
+            x = self._state_port.Eval(context)
+            kin = self._geometry.kinematics(self._scratch.plant, self._scratch.set_state(x),
+                                            x[self._nq:])
+            value.set_value((kin[1], kin[3]))
 
         # -- the laws -----------------------------------------------------------------
 
