@@ -323,3 +323,41 @@ def test_a_parameter_written_after_reading_the_displacements_takes_effect():
         return view.GetOutputPort("generalized_force").Eval(rctx).copy()
 
     np.testing.assert_array_equal(restraint_force(True), restraint_force(False))
+
+
+def test_the_merged_laws_convert_to_autodiff():
+    """A TemplateSystem like the systems it merges: its AutoDiffXd copy
+    gives the same force, and derivatives that match central differences."""
+    from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+
+    model = build_diagram(implicit(), guard=False, seat_forces=False)
+    laws = model.systems["force_laws"]
+    ctx = model.diagram.CreateDefaultContext()
+    a = np.array([0.3, -0.2, 0.5])
+    model.diagram.GetInputPort("seat_acceleration").FixValue(ctx, a)
+    pc = model.plant.GetMyMutableContextFromRoot(ctx)
+    L = model.hp.layout
+    x = model.plant.GetPositionsAndVelocities(pc)
+    x[L.rot_q] += np.linspace(-0.02, 0.02, L.num_rotational)
+    pelvis = model.plant.GetJointByName("pelvis_free").position_start()  # rpy, then xyz
+    x[pelvis + 3] -= 4e-3  # back and down: every restraint point in contact, where
+    x[pelvis + 5] -= 4e-3  # the law is smooth (its contact gating is a step)
+    x[L.nq:] = 0.1
+
+    def force(x):
+        model.plant.SetPositionsAndVelocities(pc, x)
+        return laws.GetOutputPort("generalized_force").Eval(laws.GetMyContextFromRoot(ctx)).copy()
+
+    ad = laws.ToAutoDiffXd()
+    actx = ad.CreateDefaultContext()
+    ad.GetInputPort("state").FixValue(actx, InitializeAutoDiff(x).reshape(-1))
+    ad.GetInputPort("seat_acceleration").FixValue(actx, np.array([AutoDiffXd(v) for v in a]))
+    f_ad = ad.GetOutputPort("generalized_force").Eval(actx)
+    f = force(x)
+    _close(ExtractValue(f_ad).reshape(-1), f)
+    gradient = ExtractGradient(f_ad)
+    for j in (L.rot_q[3], L.spine_q, L.nq + L.rot_v[5], pelvis + 5):  # joint, spine, rate, z
+        e = np.zeros_like(x)
+        e[j] = 1e-6
+        fd = (force(x + e) - force(x - e)) / 2e-6
+        np.testing.assert_allclose(gradient[:, j], fd, rtol=0, atol=1e-6 * np.max(np.abs(fd)))

@@ -209,8 +209,8 @@ def ForceLaws_(T):
             his_init = np.concatenate([np.asarray(his_kp, float), np.asarray(his_kd, float),
                                        np.zeros(3)])
             self._head_body = p.GetBodyByName(head)
-            self._head, self._trunk = self._head_body.body_frame(), \
-                p.GetBodyByName(trunk).body_frame()
+            self._head = self._head_body.body_frame()
+            self._trunk = p.GetBodyByName(trunk).body_frame()
 
             # Shear restraints.
             points, r_params, constraints, contact_damping = restraints
@@ -303,6 +303,12 @@ def ForceLaws_(T):
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, *other._args, converter=converter)
+
+        def _discrete(self, context, group):
+            """Discrete state group `group` (a read-only view on floats; a
+            copy for AutoDiffXd, whose object arrays cannot be viewed)."""
+            value = context.get_discrete_state(group)
+            return value.get_value() if T is float else value.CopyToVector()
 
         # -- what other code reads ----------------------------------------------------
 
@@ -397,7 +403,7 @@ def ForceLaws_(T):
             PV = self._M @ P.ravel(order="F") - self._m0
             VV = self._M @ V[:n3]
             s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:]
-            slip = context.get_discrete_state(self._slip).get_value()
+            slip = self._discrete(context, self._slip)
             face = self._geometry.face
             fmax = restraint_limits(c.restraint, face, pos_n)
             s.f_t, s.f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:], slip,
@@ -419,7 +425,7 @@ def ForceLaws_(T):
             # Joint PID (its derivative is the plant's joint damping; the
             # plant's PD actuators apply implicit_kp about 0) and the update
             # of its integral.
-            z = context.get_discrete_state(self._z).get_value()
+            z = self._discrete(context, self._z)
             e = xf[L.rot_q] - c.reference
             pi = c.kp * e + c.ki * z
             s.pid_torque = -(pi + c.kd * xf[self._rot_v_x])
@@ -484,7 +490,7 @@ def ForceLaws_(T):
 
         def _out_deflection(self, context, output):
             output.SetFromVector(self._step.Eval(context).pos
-                                 - context.get_discrete_state(self._slip).get_value())
+                                 - self._discrete(context, self._slip))
 
         def _law_output(self, law: str):
             n3 = 3 * len(self._points)
