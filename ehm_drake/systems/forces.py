@@ -119,8 +119,8 @@ class RestraintView(LawView):
 class _Constants:
     """What the laws derive from the numeric parameters, once per value."""
 
-    __slots__ = ("passive", "neg_k", "neutral", "kp", "ki", "kd", "reference", "bound",
-                 "neg_bound", "his_kp", "his_kd", "his_R_ref_T", "restraint")
+    __slots__ = ("passive", "neg_k", "neutral", "neg_kp", "neg_ki", "neg_kd", "reference",
+                 "bound", "neg_bound", "his_kp", "his_kd", "his_R_ref_T", "restraint")
 
 
 class _Step:
@@ -128,7 +128,7 @@ class _Step:
     and the update read."""
 
     __slots__ = ("f", "J", "G", "pid_torque", "pid_force", "passive_force", "his_torque",
-                 "J_his", "f_t", "f_n", "pos", "pos_n", "F", "z_next", "slip_next")
+                 "J_his", "w", "pos", "pos_n", "z_next", "slip_next")
 
 
 @TemplateSystem.define("ForceLaws_", T_list=SCALARS)
@@ -223,24 +223,28 @@ def ForceLaws_(T):
                                      or not np.any(contact_damping)
                                      else np.asarray(contact_damping, float))
             # The restraints' force per seat part straight from the law's
-            # axis and normal forces.
-            self._seat_t, self._seat_n = g.sum_parts @ g.A.T, g.sum_parts @ g.N.T
+            # axis and normal forces, stacked.
+            self._seat = np.hstack([g.sum_parts @ g.A.T, g.sum_parts @ g.N.T])
             # Points stacked body by body ("grouped"): their displacements
-            # along the axes and normals, [A; N] p - [a0; n0], in one product.
+            # along the axes and normals, [A; N] p - [a0; n0], and with the
+            # plant's constraints (two per point, in point order) each
+            # constraint's point less its anchor, S p - p_SQ (S selects
+            # coordinates: exact), in one product.  Its transpose maps the
+            # tangential, normal and constraint forces, stacked, to the
+            # grouped point forces (summing a point's two constraints).
             n = g.n
-            self._M = np.vstack([g.A_grouped, g.N_grouped])
-            self._m0 = np.concatenate([g.a0, g.n0])
+            rows, offsets = [g.A_grouped, g.N_grouped], [g.a0, g.n0]
             if constraints is not None:
-                # Per constraint (two per point, in point order): its point's
-                # grouped row, and the sum of a point's two constraint forces
-                # into the grouped force vector (3n x 6n).
                 grouped_row = np.empty(n, dtype=int)
                 grouped_row[g.order] = np.arange(n)
-                self._c_rows = grouped_row[g.axis_of]
-                Q = np.zeros((3 * n, 6 * n))
-                for j, row in enumerate(self._c_rows):
-                    Q[3 * row:3 * row + 3, 3 * j:3 * j + 3] = np.eye(3)
-                self._c_sum = Q
+                S = np.zeros((6 * n, 3 * n))
+                for j, row in enumerate(grouped_row[g.axis_of]):
+                    S[3 * j:3 * j + 3, 3 * row:3 * row + 3] = np.eye(3)
+                rows.append(S)
+                offsets.append(constraints.p_SQ.reshape(-1))
+            self._M = np.vstack(rows)
+            self._M_T = np.ascontiguousarray(self._M.T)  # (a contiguous product is faster)
+            self._m0 = np.concatenate(offsets)
 
             # Seat inertial load.
             self._instances = list(inertial_instances)
@@ -346,9 +350,12 @@ def ForceLaws_(T):
             n = self._layout.num_rotational
             c.neg_k, c.neutral = -c.passive[:n + 1], c.passive[n + 1:]
             g = context.get_numeric_parameter(self._pid_param).CopyToVector()
-            c.kp, c.ki, c.kd, limit, c.reference = (g[i * n:(i + 1) * n] for i in range(5))
+            kp, ki, kd, limit, c.reference = (g[i * n:(i + 1) * n] for i in range(5))
+            # Negated once here: the torque -(kp e + ki z + kd v) is then sums
+            # of products (negation is exact: the same bits, fewer operations).
+            c.neg_kp, c.neg_ki, c.neg_kd = -kp, -ki, -kd
             # |ki z| <= limit; a joint without integral action keeps z = 0.
-            c.bound = limit / np.where(c.ki > 0, c.ki, np.inf)
+            c.bound = limit / np.where(ki > 0, ki, np.inf)
             c.neg_bound = -c.bound
             h = context.get_numeric_parameter(self._his_param).CopyToVector()
             c.his_kp, c.his_kd, c.his_R_ref_T = h[0:3], h[3:6], rotation_from_rpy(h[6:9]).T
@@ -385,12 +392,15 @@ def ForceLaws_(T):
                 J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, W, W)
                 J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, W, W)
             groups = self._geometry.groups
-            s.J = J = np.vstack([
+            # (np.concatenate: np.vstack and np.hstack cost ~1.5 us more in
+            # Python on these small blocks.)
+            s.J = J = np.concatenate([
                 *(p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
                   for frame, P_B, _ in groups),
                 J_head, J_trunk,
                 p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, self._instances, kv, W, W)])
-            P = np.hstack([p.CalcPointsPositions(ctx, frame, P_B, W) for frame, P_B, _ in groups])
+            P = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
+                                for frame, P_B, _ in groups], axis=1)
             V = J @ x[nq:]
             n3 = 3 * len(self._points)
             # Head-in-space.
@@ -402,36 +412,35 @@ def ForceLaws_(T):
             n2 = 2 * len(self._points)
             PV = self._M @ P.ravel(order="F") - self._m0
             VV = self._M @ V[:n3]
-            s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:]
+            s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:n3]
             slip = self._discrete(context, self._slip)
             face = self._geometry.face
             fmax = restraint_limits(c.restraint, face, pos_n)
-            s.f_t, s.f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:], slip,
-                                         self._contact_damping, fmax)
-            F = self._M.T @ np.concatenate([s.f_t, s.f_n])
+            f_t, f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:n3], slip,
+                                     self._contact_damping, fmax)
             if self._constraints is not None:
                 # + the constraints' force at the step's start, s u (see
-                # `constraint_point_forces`), each point's two summed.
+                # `constraint_point_forces`).
                 k = self._constraints
-                r = P.T[self._c_rows] - k.p_SQ
+                r = PV[n3:].reshape(-1, 3)
                 d = np.sqrt(np.add.reduce(r * r, axis=1))
                 u = r / d[:, None]
-                v_pts = V[:n3].reshape(-1, 3)[self._c_rows]
-                sc = k.stiffness * (d - k.length) + k.step_damping * np.add.reduce(u * v_pts,
-                                                                                  axis=1)
-                F = F + self._c_sum @ (sc[:, None] * u).reshape(-1)
-            s.F = F
+                sc = k.stiffness * (d - k.length) + k.step_damping * np.add.reduce(
+                    u * VV[n3:].reshape(-1, 3), axis=1)
+                s.w = np.concatenate([f_t, f_n, (sc[:, None] * u).reshape(-1)])
+            else:
+                s.w = np.concatenate([f_t, f_n])
+            F = self._M_T @ s.w
             s.slip_next = slip_update(c.restraint, face, pos, pos_n, slip, fmax)
             # Joint PID (its derivative is the plant's joint damping; the
             # plant's PD actuators apply implicit_kp about 0) and the update
             # of its integral.
             z = self._discrete(context, self._z)
             e = xf[L.rot_q] - c.reference
-            pi = c.kp * e + c.ki * z
-            s.pid_torque = -(pi + c.kd * xf[self._rot_v_x])
-            s.pid_force = -pi
+            s.pid_force = pi = c.neg_kp * e + c.neg_ki * z
+            s.pid_torque = pi + c.neg_kd * xf[self._rot_v_x]
             if self._implicit_kp is not None:
-                s.pid_force = s.pid_force + self._implicit_kp * x[L.rot_q]
+                s.pid_force = pi + self._implicit_kp * x[L.rot_q]
             s.z_next = np.minimum(np.maximum(z + self._period * e, c.neg_bound), c.bound)
             # Passive joints.  On Cardan chains (no ball joint) the Cardan
             # rates are the generalized velocities and the torques the
@@ -479,11 +488,13 @@ def ForceLaws_(T):
 
         def _out_seat_forces(self, context, output):
             s = self._step.Eval(context)
-            output.SetFromVector(self._seat_t @ s.f_t + self._seat_n @ s.f_n)
+            output.SetFromVector(self._seat @ s.w[:3 * len(self._points)])
 
         def _out_point_forces(self, context, output):
             s = self._step.Eval(context)
-            output.SetFromVector(self._geometry.A.T @ s.f_t + self._geometry.N.T @ s.f_n)
+            n2 = 2 * len(self._points)
+            output.SetFromVector(self._geometry.A.T @ s.w[:n2]
+                                 + self._geometry.N.T @ s.w[n2:n2 + len(self._points)])
 
         def _out_normal(self, context, output):
             output.SetFromVector(self._step.Eval(context).pos_n)
