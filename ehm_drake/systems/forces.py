@@ -125,7 +125,8 @@ class _Constants:
 
 class _Step:
     """The laws at one state: the generalized force and what the outputs
-    and the update read."""
+    and the update read (``w``: the restraints' tangential, normal and
+    constraint forces, stacked as the rows of `ForceLaws`' point product)."""
 
     __slots__ = ("f", "J", "G", "pid_torque", "pid_force", "passive_force", "his_torque",
                  "J_his", "w", "pos", "pos_n", "z_next", "slip_next")
@@ -243,7 +244,8 @@ def ForceLaws_(T):
                 rows.append(S)
                 offsets.append(constraints.p_SQ.reshape(-1))
             self._M = np.vstack(rows)
-            self._M_T = np.ascontiguousarray(self._M.T)  # (a contiguous product is faster)
+            # (Its transpose stored contiguous: the product is ~1 us faster.)
+            self._M_T = np.ascontiguousarray(self._M.T)
             self._m0 = np.concatenate(offsets)
 
             # Seat inertial load.
@@ -392,7 +394,7 @@ def ForceLaws_(T):
                 J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, W, W)
                 J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, W, W)
             groups = self._geometry.groups
-            # (np.concatenate: np.vstack and np.hstack cost ~1.5 us more in
+            # (np.concatenate: np.vstack and np.hstack cost 1-1.5 us more in
             # Python on these small blocks.)
             s.J = J = np.concatenate([
                 *(p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
