@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..progress import Progress
-from ..realities import MODEL_REALITY
+from ..realities import MODEL_REALITY, RealityError
 from .effects import EFFECT_NAMES, EFFECTS
 from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 
@@ -74,10 +74,18 @@ class BlindSpec:
     #: The body that makes each trial's data ("ehm": the model itself; or an
     #: independent reality, `ehm_drake.realities`).
     reality: str = MODEL_REALITY
+    #: Subjects of a reference group (no effect; same body, protocol and
+    #: scatter, their own seeds) made once for the run; every trial is then
+    #: diagnosed against it (`diagnose --reference`).  0: none.
+    references: int = 0
 
     def validate(self) -> None:
         if self.trials < 1:
             raise BlindError(f"--trials must be >= 1, got {self.trials}")
+        from .reference import MIN_SUBJECTS
+        if self.references and self.references < MIN_SUBJECTS:
+            raise BlindError(f"--references must be 0 or >= {MIN_SUBJECTS}, got "
+                             f"{self.references}")
         for n in self.hidden:
             if n not in EFFECTS:
                 raise BlindError(f"unknown effect {n!r}; choose from {', '.join(EFFECTS)}")
@@ -254,6 +262,8 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
 
 
 def summarize(results: list[dict]) -> dict:
+    skipped = [r for r in results if "skipped" in r]
+    results = [r for r in results if "skipped" not in r]
     det = [r for r in results if r["score"]["detectable"]]
     with_effect = [r for r in results if r["score"]["has_effect"]]
     none = [r for r in results if not r["score"]["has_effect"]]
@@ -270,6 +280,8 @@ def summarize(results: list[dict]) -> dict:
 
     m = {
         "trials": len(results),
+        "skipped_trials": [{"trial": r["trial"], "hidden": r["hidden"], "reason": r["skipped"]}
+                           for r in skipped],
         "effect_trials": len(with_effect),
         "detectable_trials": len(det),
         "no_effect_trials": len(none),
@@ -292,9 +304,12 @@ def summarize(results: list[dict]) -> dict:
     return m
 
 
-def _diagnose_subprocess(data: Path, out: Path, spec: BlindSpec, log: Path) -> int:
+def _diagnose_subprocess(data: Path, out: Path, spec: BlindSpec, log: Path,
+                         reference: Path | None = None) -> int:
     cmd = [sys.executable, "-m", "ehm_drake.cli", "diagnose", str(data), "--out", str(out),
            "--force"]
+    if reference is not None:
+        cmd += ["--reference", str(reference)]
     if spec.candidates:
         cmd += ["--effects", ",".join(spec.candidates)]
     if spec.workers:
@@ -312,12 +327,13 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     settings = json.loads(json.dumps(settings))
     sfile = out / "blind_settings.json"
     if sfile.is_file():
-        old = {"reality": MODEL_REALITY, **json.loads(sfile.read_text())}
+        old = {"reality": MODEL_REALITY, "references": 0, **json.loads(sfile.read_text())}
         if {k: v for k, v in old.items() if k != "trials"} != \
                 {k: v for k, v in settings.items() if k != "trials"}:
             raise BlindError(f"{out} holds a blind run with other settings; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
     trials = plan(spec)
+    reference = _reference_group(spec, out, progress) if spec.references else None
     results = []
     prog = Progress("blind", len(trials), progress, unit="trials")
     for k, tr in enumerate(trials):
@@ -328,6 +344,10 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         twin = (tdir / "twin_data", out / "keys" / f"trial_{tr['trial']:03d}_twin.json")
         if rfile.is_file():
             res = json.loads(rfile.read_text())
+            if "skipped" in res:
+                results.append(res)
+                prog.skip()
+                continue
             if "detectability" not in res:  # scored before the detectability check
                 _judge(res, data, json.loads(key.read_text()),
                        json.loads((diag / "report.json").read_text()), spec, twin)
@@ -336,11 +356,22 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             prog.skip()
             continue
         t1 = time.perf_counter()
-        _synthesize_once(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
-                                   spec.directions, spec.duration_s, reality=spec.reality),
-                         data, key, spec.workers)
+        try:
+            _synthesize_once(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
+                                       spec.directions, spec.duration_s, reality=spec.reality),
+                             data, key, spec.workers)
+        except RealityError as e:
+            # The reality's own simulation diverged on this subject and effect:
+            # no data to diagnose.  Recorded (with the reason) and left out of
+            # the scores, not a crash of the whole run.
+            res = {"trial": tr["trial"], "hidden": tr["effects"], "skipped": str(e)}
+            tdir.mkdir(parents=True, exist_ok=True)
+            rfile.write_text(json.dumps(res, indent=1) + "\n")
+            results.append(res)
+            prog.step(f"trial {k + 1}: skipped, the reality diverged ({e})")
+            continue
         t_synth = time.perf_counter() - t1
-        rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log")
+        rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log", reference)
         if rc != 0:
             raise RuntimeError(f"diagnose failed on trial {tr['trial']} (exit {rc}); see "
                                f"{tdir / 'diagnose.log'}")
@@ -366,6 +397,36 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                                                indent=1) + "\n")
     (out / "blind.md").write_text(markdown(summary, results))
     return summary
+
+
+def _reference_group(spec: BlindSpec, out: Path, progress: bool) -> Path:
+    """Make (or find) the run's reference group: `spec.references` subjects
+    without effects, seeds from their own stream (never a trial's), into
+    out/reference/subject_NN (keys in out/keys).  A subject on which the
+    reality diverges is replaced by the next seed."""
+    folder = out / "reference"
+    rng = np.random.default_rng([spec.seed, 0x5EF])
+    prog = Progress("blind: reference group", spec.references, progress, unit="subjects")
+    made = 0
+    for attempt in range(3 * spec.references):
+        if made == spec.references:
+            break
+        seed = int(rng.integers(0, 2**31 - 1))
+        name = f"subject_{attempt:02d}"
+        try:
+            _synthesize_once(SynthSpec({}, seed, tuple(spec.levels), spec.directions,
+                                       spec.duration_s, reality=spec.reality),
+                             folder / name, out / "keys" / f"reference_{name}.json",
+                             spec.workers)
+        except RealityError as e:
+            prog.say(f"reference {name} (seed {seed}) skipped: {e}")
+            continue
+        made += 1
+        prog.step(name)
+    if made < spec.references:
+        raise BlindError(f"the reality diverged on too many reference subjects ({made} of "
+                         f"{spec.references} made)")
+    return folder
 
 
 def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None) -> None:
@@ -408,6 +469,12 @@ def markdown(summary: dict, results: list[dict]) -> str:
     s = summary
     lines = [f"# Blind check: {s['trials']} trials ({s['effect_trials']} with hidden effects, "
              f"{s['detectable_trials']} of them detectable; {s['no_effect_trials']} without)",
+             *(["", f"{len(s['skipped_trials'])} more trials skipped: the reality's "
+                f"simulation diverged (listed below, not scored)."]
+               if s.get("skipped_trials") else []),
+             *(["", f"Diagnosed against a reference group of "
+                f"{s['settings']['references']} subjects (`diagnose --reference`)."]
+               if s.get("settings", {}).get("references") else []),
              "", "| metric | value | acceptance |", "|---|---|---|",
              f"| top-1 accuracy (detectable trials) | {_p(s['top1'])} | >= "
              f"{_p(ACCEPTANCE['top1'])} |",
@@ -429,6 +496,10 @@ def markdown(summary: dict, results: list[dict]) -> str:
     lines += ["", "## Trials", "", "| trial | hidden (strength) | detectable | verdict | best | "
               "top-3 | held-out reduction |", "|---|---|---|---|---|---|---|"]
     for r in results:
+        if "skipped" in r:
+            hid = ", ".join(r["hidden"]) or "none"
+            lines.append(f"| {r['trial']} | {hid} | - | skipped: {r['skipped']} | | | |")
+            continue
         sc = r["score"]
         hid = ", ".join(f"{n} ({v:.2f})" for n, v in r["hidden"].items()) or "none"
         det = "-" if not sc["has_effect"] else ("yes" if sc["detectable"] else "no")

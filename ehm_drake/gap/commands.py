@@ -35,6 +35,11 @@ def add_gap_arguments(sub) -> None:
                    help=f"candidate effects (default all: {', '.join(EFFECT_NAMES)})")
     p.add_argument("--workers", type=int_at_least(1), default=None,
                    help="parallel processes (default: all cores)")
+    p.add_argument("--reference", nargs="+", metavar="DIR", default=None,
+                   help="a reference group: data of subjects without the effects in question, "
+                   "measured with the same protocol (subject folders, or a folder of them; at "
+                   "least 4). The subject is compared with the group, the model gives only the "
+                   "shape of each candidate (see ehm_drake.gap.reference)")
     p.add_argument("--no-discrepancy", action="store_true",
                    help="leave out the model-form discrepancy (an unexplained gap stays "
                    "unexplained instead of being tested as a structural one)")
@@ -83,6 +88,10 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--reality", default=MODEL_REALITY, metavar="NAME",
                    help="the body that makes each trial's data: ehm (the model itself, "
                    "default) or an independent reality (see ehm_drake.realities)")
+    p.add_argument("--references", type=int_at_least(0), default=0, metavar="K",
+                   help="make a reference group of K subjects without effects (same body and "
+                   "protocol, their own seeds) and diagnose every trial against it "
+                   "(diagnose --reference); default 0: no reference group")
     p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
@@ -99,9 +108,16 @@ def cmd_diagnose(args) -> int:
 
     params = load_params(args.params)
     out = prepare_output_dir(args.out, args.force)
-    diag = diagnose(args.data, params, args.effects, workers=args.workers,
-                    progress=not args.quiet, use_cache=not args.no_cache,
-                    discrepancy=not args.no_discrepancy)
+    if args.reference:
+        from .reference import diagnose_with_reference
+
+        diag = diagnose_with_reference(args.data, args.reference, params, args.effects,
+                                       workers=args.workers, progress=not args.quiet,
+                                       use_cache=not args.no_cache)
+    else:
+        diag = diagnose(args.data, params, args.effects, workers=args.workers,
+                        progress=not args.quiet, use_cache=not args.no_cache,
+                        discrepancy=not args.no_discrepancy)
     files = write_report(diag, out, {"params_file": args.params})
     r = diag.report
     print(f"verdict: {r['verdict']}" + (f" ({r['best_effect']})" if r["best_effect"] else ""))
@@ -112,6 +128,13 @@ def cmd_diagnose(args) -> int:
     for e in r["ranking"][:3]:
         print(f"  {e['effect']:24s} dBIC {e['delta_bic']:10.1f}  held-out reduction "
               f"{100 * e['gap_reduction_heldout']:5.1f}%")
+    mf = r.get("model_form")
+    if mf:
+        print(f"  model-form gap (model refit to the reference group vs the group): RMS log "
+              f"gain {mf['rms_log_gain_difference']:.2f}, {mf['significant_cells']} cells; "
+              "largest in " + ", ".join(f"{c['direction']}: {c['segment']} {c['dof']} "
+                                        f"{c['f_lo_hz']:g}-{c['f_hi_hz']:g} Hz"
+                                        for c in mf["cells"][:3]))
     sig = [c for c in r["localization"] if c["significant"]]
     for c in sig[:5]:
         print(f"  gap in {c['direction']}: {c['segment']} {c['dof']} {c['f_lo_hz']:g}-"
@@ -141,7 +164,7 @@ def cmd_blind(args) -> int:
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
-                     workers=args.workers, reality=args.reality)
+                     workers=args.workers, reality=args.reality, references=args.references)
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):
         return "n/a" if x is None else f"{100 * x:.0f}%"

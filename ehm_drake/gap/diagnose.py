@@ -504,6 +504,15 @@ def separating_experiment(best: dict, other: dict, state: dict) -> dict:
     }
 
 
+def candidate_names(effects=None) -> list[str]:
+    """The candidate effects to test (default all), checked by name."""
+    names = list(EFFECT_NAMES) if not effects else list(effects)
+    for n in names:
+        if n not in EFFECTS:
+            raise DiagnosisError(f"unknown effect {n!r}; choose from {', '.join(EFFECT_NAMES)}")
+    return names
+
+
 def diagnose(data, params: ModelParams | None = None, effects=None,
              measures: BodyMeasures = REFERENCE, workers: int | None = None,
              progress: bool = True, channels: str = "plane",
@@ -511,10 +520,7 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
     """Run the diagnosis on the data in `data` (see module doc)."""
     t_start = time.perf_counter()
     params = params if params is not None else load_params()
-    names = list(EFFECT_NAMES) if not effects else list(effects)
-    for n in names:
-        if n not in EFFECTS:
-            raise DiagnosisError(f"unknown effect {n!r}; choose from {', '.join(EFFECT_NAMES)}")
+    names = candidate_names(effects)
     lab = data if isinstance(data, LabData) else load_lab_data(data, channels)
     rows = lab.rows
     base_names = [f.name for f in resolve_free("default")]

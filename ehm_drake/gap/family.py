@@ -33,6 +33,7 @@ moves by millimetres when stiffnesses change, a second-order effect, as in
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 
@@ -529,6 +530,27 @@ def _rc(R: np.ndarray, Z: np.ndarray) -> np.ndarray:
     return R @ Z.real + 1j * (R @ Z.imag)
 
 
+_FACTORS: dict = {}
+
+
+def _feedback_factor(Bw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bw = U Wr with U orthonormal of Bw's rank (its SVD).  Bw is the
+    family's feedback input matrix, the same for every evaluation of a
+    family: the factor is kept by content (half the time of a delayed
+    candidate's fit went into this SVD)."""
+    key = (Bw.shape, hashlib.blake2b(np.ascontiguousarray(Bw).tobytes(), digest_size=16)
+           .digest())
+    out = _FACTORS.get(key)
+    if out is None:
+        Uf, sv, Vt = np.linalg.svd(Bw, full_matrices=False)
+        r = int(np.sum(sv > 1e-9 * sv[0])) if len(sv) and sv[0] > 0 else 0
+        out = (Uf[:, :r], sv[:r, None] * Vt[:r])
+        if len(_FACTORS) > 64:
+            _FACTORS.clear()
+        _FACTORS[key] = out
+    return out
+
+
 def response(A, Bu, Bw, C, K, h: float, freqs_hz, inputs, delay_steps: float = 0,
              rows=None) -> np.ndarray:
     """H(z) = C (zI - A - z^-d Bw K)^-1 Bu[:, inputs] at z = exp(j 2 pi f h):
@@ -546,9 +568,8 @@ def response(A, Bu, Bw, C, K, h: float, freqs_hz, inputs, delay_steps: float = 0
     # Woodbury about the open loop (zI - A)^-1 = V diag(g) V^-1, with the
     # feedback Bw K = U W of the controllers' rank (PID + head-in-space
     # torques: 27 for 62 feedback signals).
-    Uf, sv, Vt = np.linalg.svd(Bw, full_matrices=False)
-    r = int(np.sum(sv > 1e-9 * sv[0])) if len(sv) and sv[0] > 0 else 0
-    U, Wf = Uf[:, :r], (sv[:r, None] * Vt[:r]) @ K
+    U, Wr = _feedback_factor(Bw)
+    Wf = Wr @ K
     lam, V = np.linalg.eig(A)
     Vi = np.linalg.inv(V)
     G = 1.0 / (z[:, None] - lam[None, :])  # (nf, n)
@@ -558,7 +579,7 @@ def response(A, Bu, Bw, C, K, h: float, freqs_hz, inputs, delay_steps: float = 0
     c = np.exp(-2j * np.pi * f * h * delay_steps)  # (nf,)
     GB = G[:, :, None] * ViB[None]  # (nf, n, m): V^-1 M^-1 Bu
     GU = G[:, :, None] * ViU[None]  # (nf, n, r)
-    S = np.eye(r)[None] - c[:, None, None] * (WV[None] @ GU)  # (nf, r, r)
+    S = np.eye(U.shape[1])[None] - c[:, None, None] * (WV[None] @ GU)  # (nf, r, r)
     X = np.linalg.solve(S, WV[None] @ GB)  # (nf, r, m)
     return CV[None] @ (GB + c[:, None, None] * (GU @ X))
 

@@ -76,8 +76,10 @@ def markdown(rep: dict, figures: list[str]) -> str:
     gb, ga = rep["gap_before"], rep["gap_after"]
     lines += ["## Gap (excess chi^2 per degree of freedom; 0 = within measurement noise)",
               "", "| | train | held-out |", "|---|---|---|",
-              f"| given model | {rep.get('gap_given_model', float('nan')):.3g} | |",
-              f"| base refit (before) | {gb['train']:.3g} | {gb['heldout']:.3g} |",
+              *([f"| given model | {rep['gap_given_model']:.3g} | |"]
+                if "gap_given_model" in rep else []),
+              f"| {'against the reference group' if rep.get('reference') else 'base refit'} "
+              f"(before) | {gb['train']:.3g} | {gb['heldout']:.3g} |",
               f"| with {rep.get('best_candidate') or 'best'} (after) | {ga['train']:.3g} | "
               f"{ga['heldout']:.3g} |", ""]
     lines += ["## Candidates (best first)", "",
@@ -109,6 +111,27 @@ def markdown(rep: dict, figures: list[str]) -> str:
         lines += ["| direction | segment | DoF | band | RMS discrepancy |", "|---|---|---|---|---|"]
         lines += [f"| {c['direction']} | {c['segment']} | {c['dof']} | {c['f_lo_hz']:g}-"
                   f"{c['f_hi_hz']:g} Hz | {_pct(c['delta_rms'])} |" for c in sp["cells"][:10]]
+        lines.append("")
+    ref, mf = rep.get("reference"), rep.get("model_form")
+    if ref and mf:
+        lines += [f"## Reference group ({ref['size']} subjects)", "",
+                  "The subject is compared with the group; the model, refit to the group mean "
+                  "(re-linearized), gives the shape of each candidate. A candidate is named "
+                  "when its held-out chi^2 gain exceeds the threshold set by the group's own "
+                  "subjects (each against the others).", "",
+                  "| effect | held-out chi^2 gain | threshold (group's own subjects) | "
+                  "beyond |", "|---|---|---|---|"]
+        lines += [f"| {e['effect']} | {e['heldout_gain']:.0f} | {e['null_threshold']:.0f} | "
+                  f"{'yes' if e['beyond_null'] else 'no'} |" for e in rep["ranking"]]
+        lines += ["", f"Model-form gap (the model refit to the group against the group mean): "
+                  f"RMS log gain {mf['rms_log_gain_difference']:.2f}, phase "
+                  f"{mf['rms_phase_difference_deg']:.0f} deg RMS, {mf['significant_cells']} "
+                  "cells beyond the group mean's uncertainty; the largest:", "",
+                  "| direction | segment | DoF | band | RMS log-gain difference | share |",
+                  "|---|---|---|---|---|---|"]
+        lines += [f"| {c['direction']} | {c['segment']} | {c['dof']} | {c['f_lo_hz']:g}-"
+                  f"{c['f_hi_hz']:g} Hz | {c['rms_log_gain_difference']:.2f} | "
+                  f"{_pct(c['share'])} |" for c in mf["cells"][:8]]
         lines.append("")
     if rep.get("separating_experiment"):
         lines += ["## Experiment that would separate the tied candidates", "",
@@ -176,7 +199,8 @@ def write_figures(diag: Diagnosis, out: Path) -> list[str]:
         _, after, _ = _cell_matrix(loc, "gap_after")
         vmax = max(np.nanmax(before), 1.0)
         fig, axes = plt.subplots(1, 2, figsize=(10, 0.22 * len(chans) + 2), sharey=True)
-        for ax, M, title in ((axes[0], before, "before (base refit)"),
+        base_label = "reference group" if rep.get("reference") else "base refit"
+        for ax, M, title in ((axes[0], before, f"before ({base_label})"),
                              (axes[1], after, f"after ({rep.get('best_candidate')})")):
             im = ax.imshow(np.log10(1 + np.nan_to_num(M)), aspect="auto", cmap="magma_r",
                            vmin=0, vmax=math.log10(1 + vmax))
@@ -243,7 +267,8 @@ def _worst_cells_figure(diag: Diagnosis, out: Path, n: int = 6) -> list[str]:
             col = f"C{k}"
             ax.fill_between(f[o], mag - sd, mag + sd, color=col, alpha=0.25, lw=0)
             ax.plot(f[o], mag, ".", color=col, ms=2, label=f"measured {lv:g} m/s²")
-            ax.plot(f[o], np.abs(H0[m])[o], "--", color=col, lw=1, label="base refit")
+            ax.plot(f[o], np.abs(H0[m])[o], "--", color=col, lw=1,
+                    label="reference group mean" if rep.get("reference") else "base refit")
             if H1 is not None:
                 ax.plot(f[o], np.abs(H1[m])[o], "-", color=col, lw=1.2, label=best)
         ax.axvspan(c["f_lo_hz"], c["f_hi_hz"], color="y", alpha=0.15)

@@ -1,0 +1,695 @@
+"""Gap diagnosis against a reference group: a design in which the model-form
+gap cancels.
+
+A real subject differs from any model by more than the measurement error;
+on such data the model-based diagnosis (`diagnose.diagnose`) cannot tell an
+unmodelled effect from the model's structural error.  A lab that also
+measures a *reference group* (same population, seat and protocol, none of
+them with the effect in question) has what the model lacks: the
+population's own transmissibility and scatter.  The subject is compared
+with the group; the model gives only the *shape* of each candidate effect:
+
+1. The group: per row (test x channel x frequency), the mean of log H over
+   the K subjects (gain and phase, as one complex number), the deviations
+   of each subject from it, and their variance smoothed over 5 bins.
+2. The anchor: the model's base parameters (the default 20, within their
+   physiological bounds) refit to the group mean, re-linearized at each
+   iteration (`fit_anchor`), so that the effect signatures are those of a
+   model that resonates where the group does.  What the anchor still misses
+   is the model-form gap; the report says where it lies (`model_form`).
+3. The subject's residual r = log H_subject - group mean, with the
+   covariance of the group's smoothed variance times (1 + 1/K) plus the K
+   deviations as a low-rank part (subjects differ from the mean by whole
+   resonances shifted together, not bin by bin): chi^2 = min_u |e - A u|^2
+   + |u|^2, e whitened by the diagonal, A the whitened deviations
+   (Woodbury; `profile_nuisance`).
+4. Each candidate's signature at the anchor, log H_effect(c) - log
+   H_anchor, its coordinates c fitted to r; held out per test (fitted to
+   the other tests, the nuisance u too).  The held-out chi^2 gain decides.
+5. Calibration from the group itself: each reference subject against the
+   other K - 1 (leave one out) gives every candidate's held-out gain on
+   subjects without any effect.  A candidate is named when its gain
+   exceeds `NULL_FACTOR` times the largest of these (and `MIN_GAIN`).
+6. Verdict: `explained` (the largest held-out gain among the candidates
+   beyond their null), `ambiguous` (another within `AMBIGUITY_MARGIN` of
+   its held-out share), `unexplained` (the subject differs from the group
+   beyond its scatter, no candidate beyond its null) or
+   `no_significant_gap`.  The effect's own share: the share of the
+   subject's held-out gap against the group it removes; the model-form gap
+   is reported apart.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..identification.parameters import apply_scales, resolve_free, scale_bounds
+from ..model.anthropometry import REFERENCE, BodyMeasures
+from ..parallel import run_jobs, worker_count
+from ..params import ModelParams, load_params
+from ..progress import Progress
+from .diagnose import (
+    AMBIGUITY_MARGIN,
+    Diagnosis,
+    DiagnosisError,
+    LabData,
+    cache_dir,
+    candidate_names,
+    load_families,
+    load_lab_data,
+    separation_slope,
+)
+from .localize import MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
+from .models import Candidate, Predictor, Statics, coordinate, fit_candidate
+
+#: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
+#: each group it forms, and the scatter's variance needs a few subjects.
+MIN_SUBJECTS = 4
+#: Bins of the running mean of the group's variance per channel (a variance
+#: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).
+VARIANCE_SMOOTHING_BINS = 5
+#: Re-linearized iterations of the anchor fit (the cost changed by < 1% in
+#: the last of 4 on the lumped reality's group of 8: 288k, 250k, 239k, 237k).
+ANCHOR_ITERATIONS = 3
+#: A candidate is named when its held-out gain exceeds this factor times the
+#: largest gain it reached on the group's own subjects (leave one out): with
+#: K subjects the largest of K null gains is about the (1 - 1/K) quantile of
+#: the null; the factor covers the tail beyond it.
+NULL_FACTOR = 2.0
+#: ... and at least this held-out chi^2 gain (the 0.1% point of chi^2 with 3
+#: degrees of freedom: a candidate of up to 3 parameters at p < 0.001).
+MIN_GAIN = 16.3
+#: Evaluations of a candidate's descent on all tests (a second descent from
+#: refreshed response statistics and each held-out refit take half).
+DESCENT_EVALUATIONS = 16
+CACHE_VERSION = "2"
+
+
+# ---------------------------------------------------------------------------
+# The group
+# ---------------------------------------------------------------------------
+
+
+def _row_keys(rows: Rows) -> list[str]:
+    return [f"{d}|{c}|{lv:.6g}|{f:.6f}" for d, c, lv, f in
+            zip(rows.direction, rows.channel, rows.level, rows.freq, strict=True)]
+
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    """log H with its phase wrapped to (-pi, pi]."""
+    return x.real + 1j * (np.pi - (np.pi - x.imag) % (2 * np.pi))
+
+
+def _smooth(rows: Rows, v: np.ndarray, n: int = VARIANCE_SMOOTHING_BINS) -> np.ndarray:
+    """Running mean of `v` over `n` frequency bins within each test and
+    channel (rows are in frequency order there)."""
+    out = np.empty_like(v)
+    keys = [f"{d}|{c}|{lv:.6g}" for d, c, lv in zip(rows.direction, rows.channel, rows.level,
+                                                     strict=True)]
+    _, inv = np.unique(keys, return_inverse=True)
+    kernel = np.ones(n)
+    for k in range(inv.max() + 1):
+        m = np.flatnonzero(inv == k)
+        m = m[np.argsort(rows.freq[m])]
+        out[m] = np.convolve(v[m], kernel, "same") / np.convolve(np.ones(len(m)), kernel, "same")
+    return out
+
+
+@dataclass
+class ReferenceGroup:
+    """K subjects measured with one protocol, without the effects in
+    question.  `rows`: the protocol's rows (H = the group's geometric mean,
+    gain and phase); `deviations` (K, rows): each subject's log H minus the
+    mean; `variance`: their smoothed variance per row (complex, both
+    components)."""
+
+    sources: list[str]
+    rows: Rows
+    tests: list
+    mean_log: np.ndarray
+    deviations: np.ndarray
+    variance: np.ndarray
+
+    @property
+    def size(self) -> int:
+        return len(self.deviations)
+
+    @classmethod
+    def from_labs(cls, labs: list[LabData]) -> ReferenceGroup:
+        if len(labs) < MIN_SUBJECTS:
+            raise DiagnosisError(f"a reference group needs at least {MIN_SUBJECTS} subjects, "
+                                 f"got {len(labs)}")
+        keys = [_row_keys(lab.rows) for lab in labs]
+        common = set(keys[0]).intersection(*keys[1:])
+        first = labs[0]
+        keep = np.array([k in common for k in keys[0]])
+        if keep.sum() < 0.5 * len(keys[0]):
+            raise DiagnosisError(
+                "the reference subjects were not measured with one protocol: they share "
+                f"{int(keep.sum())} of {len(keys[0])} rows (tests, channels, frequencies) of "
+                f"{first.source}")
+        rows = first.rows.take(keep)
+        order = [k for k in keys[0] if k in common]
+        logs = []
+        for lab, ks in zip(labs, keys, strict=True):
+            idx = {k: i for i, k in enumerate(ks)}
+            H = lab.rows.H[[idx[k] for k in order]]
+            if np.any(~np.isfinite(H)) or np.any(H == 0):
+                raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in "
+                                     "the reference data")
+            logs.append(np.log(H))
+        pivot = logs[0]
+        rel = np.array([_wrap(x - pivot) for x in logs])
+        mean_rel = rel.mean(axis=0)
+        dev = rel - mean_rel
+        K = len(labs)
+        var = np.sum(np.abs(dev) ** 2, axis=0) / (K - 1)
+        mean_log = pivot + mean_rel
+        tests_there = {(d, round(lv, 6)) for d, lv in rows.tests}
+        tests = [t for t in first.tests if (t.direction, round(t.level, 6)) in tests_there]
+        return cls([lab.source for lab in labs], dataclasses.replace(rows, H=np.exp(mean_log)),
+                   tests, mean_log, dev, _smooth(rows, var))
+
+    def without(self, j: int) -> ReferenceGroup:
+        """The group less subject j (its deviations re-centred)."""
+        keep = [i for i in range(self.size) if i != j]
+        dev = self.deviations[keep]
+        shift = dev.mean(axis=0)
+        dev = dev - shift
+        var = np.sum(np.abs(dev) ** 2, axis=0) / (len(keep) - 1)
+        mean_log = self.mean_log + shift
+        return ReferenceGroup([self.sources[i] for i in keep],
+                              dataclasses.replace(self.rows, H=np.exp(mean_log)), self.tests,
+                              mean_log, dev, _smooth(self.rows, var))
+
+    def subject_log(self, j: int) -> np.ndarray:
+        return self.mean_log + self.deviations[j]
+
+    def fingerprint(self) -> str:
+        h = hashlib.sha256()
+        for a in (self.mean_log, self.deviations, self.rows.freq, self.rows.level):
+            h.update(np.ascontiguousarray(a).tobytes())
+        h.update("|".join(_row_keys(self.rows)).encode())
+        return h.hexdigest()[:20]
+
+    def align(self, lab: LabData) -> np.ndarray:
+        """Index of each group row in the subject's rows; a clear error when
+        the subject lacks a test or channel of the group's protocol."""
+        idx = {k: i for i, k in enumerate(_row_keys(lab.rows))}
+        missing = [k for k in _row_keys(self.rows) if k not in idx]
+        if missing:
+            d, c, lv, f = missing[0].split("|")
+            raise DiagnosisError(
+                f"{lab.source}: {len(missing)} rows of the reference protocol are not in the "
+                f"data (first: direction {d}, level {lv} m/s^2, channel {c}, {f} Hz); the "
+                "subject and the reference group must be measured with the same tests")
+        return np.array([idx[k] for k in _row_keys(self.rows)])
+
+
+def expand_reference_paths(paths) -> list[Path]:
+    """Subject folders: each path is a subject (frf.csv or timeseries.csv
+    in it, or an frf.csv) or a folder of subject folders."""
+    out = []
+    for p in map(Path, paths):
+        if p.is_file() or (p / "frf.csv").is_file() or (p / "timeseries.csv").is_file():
+            out.append(p)
+        elif p.is_dir():
+            subs = sorted(q for q in p.iterdir() if q.is_dir() and (
+                (q / "frf.csv").is_file() or (q / "timeseries.csv").is_file()))
+            if not subs:
+                raise DiagnosisError(f"{p}: no subject data (frf.csv) in it or its subfolders")
+            out += subs
+        else:
+            raise FileNotFoundError(f"reference data not found: {p}")
+    return out
+
+
+def load_reference(paths, channels: str = "plane") -> ReferenceGroup:
+    return ReferenceGroup.from_labs([load_lab_data(p, channels)
+                                     for p in expand_reference_paths(paths)])
+
+
+# ---------------------------------------------------------------------------
+# The anchor: the model refit to the group mean
+# ---------------------------------------------------------------------------
+
+
+def _write_json(path: Path, obj) -> None:
+    """Cache `obj` at `path` (a cache that cannot be written is skipped)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(obj))
+    except OSError:
+        pass
+
+
+class _BoundedPredictor(Predictor):
+    """A base-only predictor whose log-scales stay within the parameters'
+    physiological bounds around the current linearization point."""
+
+    def __init__(self, *args, scale_lo, scale_hi, **kw):
+        super().__init__(*args, **kw)
+        self._lo, self._hi = np.log(scale_lo) + 1e-9, np.log(scale_hi) - 1e-9
+
+    def bounds(self):
+        lo, hi = super().bounds()
+        nb = self.n_base
+        lo[:nb] = np.maximum(lo[:nb], self._lo)
+        hi[:nb] = np.minimum(hi[:nb], self._hi)
+        return lo, np.maximum(hi, lo + 1e-9)
+
+
+def fit_anchor(group: ReferenceGroup, params: ModelParams, measures: BodyMeasures,
+               iterations: int = ANCHOR_ITERATIONS, workers=None, progress=None,
+               use_cache: bool = True) -> dict:
+    """The base parameters refit to the group mean, re-linearized at every
+    iteration: {"log_scales", "history": [(cost before, after)], "params"}.
+    Weighted by the variance of the group mean (scatter / K) plus the 3%
+    model floor.  Cached by the group's data and the model."""
+    from .diagnose import _code_fingerprint
+
+    free = resolve_free("default")
+    base_names = [f.name for f in free]
+    key = hashlib.sha256(json.dumps([CACHE_VERSION, _code_fingerprint(), group.fingerprint(),
+                                     params.to_dict(), measures.mass_kg, measures.stature_m,
+                                     iterations], sort_keys=True, default=float).encode()
+                         ).hexdigest()[:20]
+    path = cache_dir() / "anchors" / f"{key}.json"
+    if use_cache and path.is_file():
+        out = json.loads(path.read_text())
+        out["params"] = apply_scales(params, free, np.exp(out["log_scales"]))
+        return out
+    rows = dataclasses.replace(group.rows, rel_var=group.variance / group.size / 2
+                               + MODEL_FLOOR**2)
+    total = np.zeros(len(free))
+    history = []
+    every = np.ones(len(rows), bool)
+    for k in range(iterations):
+        pk = apply_scales(params, free, np.exp(total))
+        fams = load_families(pk, measures, [], base_names, workers, None, use_cache)
+        sb = np.array([scale_bounds(pk, f) for f in free])
+        pred = _BoundedPredictor(fams["base"], Candidate(()), rows, group.tests, base_names,
+                                 Statics(fams["base"].family.info,
+                                         separation_slope(pk, measures)),
+                                 scale_lo=sb[:, 0], scale_hi=sb[:, 1])
+        zero = np.zeros(len(free))
+        pred.update_statistics(zero)
+        from .models import residuals
+        before = float(np.sum(residuals(pred, zero, every)[:2 * len(rows)] ** 2))
+        fit = fit_candidate(pred, every, zero)
+        after = float(np.sum(residuals(pred, fit.theta, every)[:2 * len(rows)] ** 2))
+        history.append([before, after])
+        total = total + fit.theta
+        if progress:
+            progress(k + 1, iterations, before, after)
+    out = {"log_scales": total.tolist(), "history": history, "base_names": base_names}
+    if use_cache:
+        _write_json(path, out)
+    out["params"] = apply_scales(params, free, np.exp(total))
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Scoring a subject against the group
+# ---------------------------------------------------------------------------
+
+
+class _Scorer:
+    """The candidates' signatures at the anchor on the group's rows, and
+    their fits to a subject's residual against a (possibly reduced) group."""
+
+    def __init__(self, group: ReferenceGroup, families: dict, slope, base_names):
+        self.rows, self.tests = group.rows, group.tests
+        self.families, self.slope, self.base_names = families, slope, base_names
+        self.theta0 = np.zeros(len(base_names))
+        base = self._predictor(Candidate(()))
+        base.update_statistics(self.theta0)
+        self.log0 = np.log(base.predict(self.theta0))
+        self.test_masks = [self.rows.test_mask(t.direction, t.level) for t in self.tests]
+
+    def _predictor(self, cand: Candidate) -> Predictor:
+        fam = self.families[cand.grid_effect or "base"]
+        return Predictor(fam, cand, self.rows, self.tests, self.base_names,
+                         Statics(fam.family.info, self.slope))
+
+    def signature_fn(self, cand: Candidate):
+        """sig(c): the candidate's log H at coordinates c less the
+        anchor's, with the response statistics of the equivalent
+        linearization as last refreshed (refresh(c) sets them at c; as in
+        `fit_candidate`, they are held during a descent and refreshed
+        between descents)."""
+        pred = self._predictor(cand)
+
+        def refresh(c):
+            pred.update_statistics(np.concatenate([self.theta0, c]))
+
+        def sig(c):
+            th = np.concatenate([self.theta0, c])
+            return _wrap(np.log(pred.predict(th)) - self.log0)
+        lo, hi = pred.bounds()
+        nb = len(self.base_names)
+        return sig, refresh, lo[nb:], hi[nb:]
+
+    def score(self, r: np.ndarray, group: ReferenceGroup, names) -> dict:
+        """Fit every candidate in `names` to the residual r (complex log,
+        the group's rows); per-row chi^2 before and after, on all rows and
+        held out per test."""
+        K = group.size
+        sw = 1.0 / np.sqrt(group.variance * (1 + 1 / K))
+        A_all = group.deviations.T * math.sqrt((1 + 1 / K) / (K - 1)) * sw[:, None]
+
+        def rows_chi(x, train, where):
+            """Per-row chi^2 at `where` after the nuisance fitted on
+            `train`, and the prior term |u|^2."""
+            u = profile_nuisance(x, A_all, train)
+            chi = np.full(len(x), np.nan)
+            chi[where] = np.abs(x - A_all @ u)[where] ** 2
+            return chi, float(u @ u)
+
+        def residual_vec(x, train):
+            u = profile_nuisance(x, A_all, train)
+            e = (x - A_all @ u)[train]
+            return np.concatenate([e.real, e.imag, u])
+
+        every = np.ones(len(r), bool)
+        x0 = r * sw
+        chi0_all, p0 = rows_chi(x0, every, every)
+        chi0_held = np.full(len(r), np.nan)
+        for m in self.test_masks:
+            chi0_held[m] = rows_chi(x0, ~m, m)[0][m]
+        out = {"none": {"chi_all": chi0_all, "chi_heldout": chi0_held, "coords": [],
+                        "cost": float(np.sum(chi0_all) + p0)}}
+        for name in names:
+            cand = Candidate(tuple(name.split("+")))
+            sig, refresh, lo, hi = self.signature_fn(cand)
+
+            def res(c, train, sig=sig):
+                return residual_vec((r - sig(c)) * sw, train)
+
+            def start_cost(c, refresh=refresh, res=res):
+                refresh(c)
+                return float(np.sum(res(c, every) ** 2))
+            # The strength path, and the effect off (where a null subject sits).
+            off = np.array([coordinate(p, p.off) if p.off > 0 or not p.log else lo[i]
+                            for i, (_, p) in enumerate(cand.params)])
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), off]]
+            x = min(starts, key=start_cost)
+            for nfev in (DESCENT_EVALUATIONS, DESCENT_EVALUATIONS // 2):
+                refresh(x)
+                x = least_squares(lambda c, res=res: res(c, every), x, bounds=(lo, hi),
+                                  diff_step=1e-3, max_nfev=nfev, x_scale="jac").x
+            refresh(x)
+            s_all = sig(x)
+            chi_all, p = rows_chi((r - s_all) * sw, every, every)
+            chi_held = np.full(len(r), np.nan)
+            for m in self.test_masks:
+                x2 = least_squares(lambda c, m=m, res=res: res(c, ~m), x, bounds=(lo, hi),
+                                   diff_step=1e-3, max_nfev=DESCENT_EVALUATIONS // 2,
+                                   x_scale="jac").x
+                chi_held[m] = rows_chi((r - sig(x2)) * sw, ~m, m)[0][m]
+            out[name] = {"chi_all": chi_all, "chi_heldout": chi_held,
+                         "coords": x.tolist(), "cost": float(np.sum(chi_all) + p),
+                         "signature": s_all}
+        return out
+
+
+def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
+    """The real coefficients u minimizing |x - A u|^2 + |u|^2 over the rows
+    `train` (x: whitened complex residual per row, A: (rows, K) whitened
+    complex scatter directions).  At this u, |x - A u|^2 + |u|^2 equals
+    x^T (I + A A^T)^{-1} x (real and imaginary parts stacked): the chi^2 of
+    x under the covariance I + A A^T (Woodbury)."""
+    At = np.vstack([A[train].real, A[train].imag])
+    y = np.concatenate([x[train].real, x[train].imag])
+    return np.linalg.solve(At.T @ At + np.eye(At.shape[1]), At.T @ y)
+
+
+def _gain(res: dict, base: dict) -> float:
+    return float(np.nansum(base["chi_heldout"]) - np.nansum(res["chi_heldout"]))
+
+
+# ---------------------------------------------------------------------------
+# Worker side (the leave-one-out null and the subject, in parallel)
+# ---------------------------------------------------------------------------
+
+
+_W: dict = {}
+
+
+def _init_worker(state: dict) -> None:
+    _W.clear()
+    _W.update(state)
+
+
+def _scorer() -> _Scorer:
+    if "scorer" not in _W:
+        _W["scorer"] = _Scorer(_W["group"], _W["families"], _W["slope"], _W["base_names"])
+    return _W["scorer"]
+
+
+def _null_job(j: int) -> dict:
+    """Subject j of the group against the other K - 1: held-out gains."""
+    g = _W["group"]
+    sub = g.without(j)
+    r = _wrap(g.subject_log(j) - sub.mean_log)
+    res = _scorer().score(r, sub, _W["names"])
+    return {"subject": j, "gains": {n: _gain(res[n], res["none"]) for n in _W["names"]}}
+
+
+def _subject_job(name: str) -> dict:
+    """One candidate (or "none") fitted to the subject's residual."""
+    s = _scorer()
+    res = s.score(_W["residual"], _W["group"], [] if name == "none" else [name])
+    return {"name": name, **res[name]}
+
+
+def null_gains(group: ReferenceGroup, families, slope, base_names, names, workers=None,
+               progress=None, use_cache: bool = True, anchor_key: str = "") -> dict:
+    """{candidate: [held-out gain of each reference subject against the
+    others]}: the gains of subjects without any effect.  Cached."""
+    key = hashlib.sha256(json.dumps([CACHE_VERSION, anchor_key, group.fingerprint(),
+                                     sorted(names)]).encode()).hexdigest()[:20]
+    path = cache_dir() / "reference_null" / f"{key}.json"
+    if use_cache and path.is_file():
+        return json.loads(path.read_text())
+    state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
+             "names": list(names)}
+    out = {n: [None] * group.size for n in names}
+    for r in run_jobs([(_null_job, j) for j in range(group.size)],
+                      min(worker_count(workers), group.size),
+                      (lambda done, total, i, r: progress(done, total)) if progress else None,
+                      _init_worker, (state,)):
+        for n, g in r["gains"].items():
+            out[n][r["subject"]] = g
+    if use_cache:
+        _write_json(path, out)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# The diagnosis
+# ---------------------------------------------------------------------------
+
+
+def diagnose_with_reference(data, reference, params: ModelParams | None = None, effects=None,
+                            measures: BodyMeasures = REFERENCE, workers: int | None = None,
+                            progress: bool = True, channels: str = "plane",
+                            use_cache: bool = True) -> Diagnosis:
+    """Diagnose the subject in `data` against the reference group
+    `reference` (a `ReferenceGroup`, or subject folders / a folder of them);
+    see the module doc."""
+    t_start = time.perf_counter()
+    params = params if params is not None else load_params()
+    names = candidate_names(effects)
+    group = reference if isinstance(reference, ReferenceGroup) else \
+        load_reference(reference, channels)
+    lab = data if isinstance(data, LabData) else load_lab_data(data, channels)
+    idx = group.align(lab)
+    Progress("diagnose", enabled=progress).say(
+        f"reference group of {group.size} subjects, {len(group.rows)} rows, "
+        f"{len(group.tests)} tests; {len(names)} candidates")
+    base_names = [f.name for f in resolve_free("default")]
+
+    t0 = time.perf_counter()
+    anchor_prog = Progress("diagnose: model refit to the group", ANCHOR_ITERATIONS, progress,
+                           unit="linearizations")
+    anchor = fit_anchor(group, params, measures, workers=workers,
+                        progress=lambda k, n, b, a: anchor_prog.step(f"(cost {b:.3g} -> {a:.3g})"),
+                        use_cache=use_cache)
+    fam_prog = Progress("diagnose: linearizing the candidate models at the anchor", None,
+                        progress, unit="models")
+
+    def fam_progress(done, total):
+        fam_prog.total = total
+        fam_prog.update(done, force=done % 10 == 0)
+
+    families = load_families(anchor["params"], measures, names, base_names, workers,
+                             fam_progress, use_cache)
+    slope = separation_slope(anchor["params"], measures)
+    t_fam = time.perf_counter() - t0
+
+    t1 = time.perf_counter()
+    null_prog = Progress("diagnose: calibration on the group (leave one out)", group.size,
+                         progress, unit="subjects")
+    anchor_key = hashlib.sha256(json.dumps(anchor["log_scales"]).encode()).hexdigest()[:16]
+    nulls = null_gains(group, families, slope, base_names, names, workers,
+                       lambda done, total: null_prog.update(done), use_cache, anchor_key)
+    residual = _wrap(np.log(lab.rows.H[idx]) - group.mean_log)
+    state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
+             "names": names, "residual": residual}
+    fit_prog = Progress("diagnose: candidates", len(names) + 1, progress, unit="fitted")
+    results = {}
+    for r in run_jobs([(_subject_job, n) for n in ["none", *names]],
+                      min(worker_count(workers), len(names) + 1),
+                      lambda done, total, i, r: fit_prog.step(f"({r['name']})"),
+                      _init_worker, (state,)):
+        results[r["name"]] = r
+    t_fit = time.perf_counter() - t1
+    log_model = _Scorer(group, families, slope, base_names).log0
+    report, before, after = _assemble(lab, group, idx, results, names, nulls, anchor,
+                                      log_model, base_names)
+    report["timing_s"] = {"families": t_fam, "fits": t_fit,
+                          "total": time.perf_counter() - t_start,
+                          "workers": min(worker_count(workers), len(names) + 1)}
+    rows = lab.rows.take(idx)
+    # The figures compare the subject with the group mean and with the
+    # group mean plus the best effect's signature.
+    shown = {"none": {"H_all": np.exp(group.mean_log)}}
+    best = report["best_candidate"]
+    if best in results:
+        shown[best] = {"H_all": np.exp(group.mean_log + results[best]["signature"])}
+    return Diagnosis(report, rows, shown, base_names, before, after)
+
+
+def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
+    """Where the model (refit to the group) differs from the group mean:
+    the cells beyond the group mean's uncertainty plus the model floor, each
+    with its RMS log-gain difference."""
+    from .localize import BANDS
+
+    rows = group.rows
+    d = _wrap(log_model - group.mean_log)
+    chi = np.abs(d) ** 2 / (group.variance / group.size + 2 * MODEL_FLOOR**2)
+    cells = localize(rows, chi)
+    lo = np.array([b[0] for b in BANDS])[rows.band]
+    for c in cells:
+        m = (rows.direction == c["direction"]) & (rows.segment == c["segment"]) & \
+            (rows.dof == c["dof"]) & (lo == c["f_lo_hz"])
+        c["rms_log_gain_difference"] = float(np.sqrt(np.mean(d.real[m] ** 2)))
+    return {"rms_log_gain_difference": float(np.sqrt(np.mean(d.real**2))),
+            "rms_phase_difference_deg": float(np.degrees(np.sqrt(np.mean(d.imag**2)))),
+            "gap": gap_value(chi, cell_keys(rows)), "cells": cells[:12],
+            "significant_cells": int(sum(c["significant"] for c in cells))}
+
+
+def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_names):
+    rows = group.rows
+    keys = cell_keys(rows)
+    base = results["none"]
+    n_rows = len(rows)
+    ranking = []
+    for n in names:
+        r = results[n]
+        cand = Candidate(tuple(n.split("+")))
+        gain = _gain(r, base)
+        null = [g for g in nulls.get(n, []) if g is not None]
+        threshold = max(MIN_GAIN, NULL_FACTOR * max(null, default=0.0))
+        g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
+        g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
+        k = len(cand.params)
+        ranking.append({
+            "effect": n,
+            "params": {e: {p: float(v) for p, v in vals.items()}
+                       for e, vals in cand.values(np.array(r["coords"])).items()},
+            "gap_reduction_train": float(1 - g_t / g0_t) if g0_t > 0 else 0.0,
+            "gap_reduction_heldout": float(1 - g_h / g0_h) if g0_h > 0 else 0.0,
+            "delta_bic": float(-gain + k * math.log(2 * n_rows)),
+            "gap_train": g_t, "gap_heldout": g_h,
+            "heldout_gain": gain, "null_gains": null, "null_threshold": threshold,
+            "beyond_null": bool(gain > threshold),
+            "level_dependent": cand.level_dependent, "n_effect_params": k,
+            "base_scales": dict(zip(base_names, np.exp(anchor["log_scales"]).tolist(),
+                                    strict=True)),
+        })
+    # Beyond the null first, then by held-out gain (the evidence).
+    ranking.sort(key=lambda e: (not e["beyond_null"], -e["heldout_gain"]))
+    cells_before = localize(rows, base["chi_all"])
+    significant = [c for c in cells_before if c["significant"]]
+    supported = [e for e in ranking if e["beyond_null"]]
+    best = ranking[0] if ranking else None
+    verdict, best_effect, ambiguous_with = "unexplained", None, []
+    if supported:
+        best = supported[0]
+        best_effect = best["effect"]
+        close = [e for e in supported[1:] if best["gap_reduction_heldout"]
+                 - e["gap_reduction_heldout"] < AMBIGUITY_MARGIN]
+        if close:
+            verdict, ambiguous_with = "ambiguous", [e["effect"] for e in close]
+            explanation = (f"{best_effect} and {', '.join(ambiguous_with)} explain the subject's "
+                           f"difference from the reference group equally well "
+                           f"({100 * best['gap_reduction_heldout']:.0f}% vs "
+                           f"{100 * close[0]['gap_reduction_heldout']:.0f}% of the held-out gap)")
+        else:
+            verdict = "explained"
+            explanation = (f"{best_effect} removes {100 * best['gap_reduction_heldout']:.0f}% of "
+                           f"the subject's held-out gap to the reference group (held-out chi^2 "
+                           f"gain {best['heldout_gain']:.0f}, "
+                           f"{best['heldout_gain'] / best['null_threshold']:.1f}x its threshold "
+                           f"from the group's own subjects)")
+    elif significant:
+        explanation = (f"the subject differs from the reference group beyond its scatter in "
+                       f"{len(significant)} cells, and no candidate exceeds the gains it reaches "
+                       f"on the group's own subjects: an effect outside the candidate library, "
+                       f"or a subject outside the group's population")
+    else:
+        verdict = "no_significant_gap"
+        explanation = ("the subject is within the reference group's scatter (no cell beyond it "
+                       "at p < 0.01, Bonferroni) and no candidate exceeds the gains it reaches on "
+                       "the group's own subjects")
+    after = results[best["effect"]] if best else base
+    cells_after = localize(rows, after["chi_all"])
+    model_form = _model_form(group, log_model)
+    report = {
+        "verdict": verdict,
+        "best_effect": best_effect,
+        "best_candidate": best["effect"] if best else None,
+        "ranking": ranking,
+        "localization": mark_after(cells_before, cells_after),
+        "gap_before": {"train": gap_value(base["chi_all"], keys),
+                       "heldout": gap_value(base["chi_heldout"], keys)},
+        "gap_after": {"train": gap_value(after["chi_all"], keys),
+                      "heldout": gap_value(after["chi_heldout"], keys)},
+        "significant_cells": len(significant),
+        "ambiguous_with": ambiguous_with,
+        "separating_experiment": None,
+        "explanation": explanation,
+        "model_form": model_form,
+        "reference": {"subjects": group.sources, "size": group.size,
+                      "anchor_scales": dict(zip(base_names,
+                                                np.exp(anchor["log_scales"]).tolist(),
+                                                strict=True)),
+                      "anchor_history": anchor["history"]},
+        "data": {"source": lab.source, "rows": len(rows),
+                 "rows_not_in_reference": int(len(lab.rows) - len(idx)),
+                 "tests": [{"direction": t.direction, "level_rms": t.level,
+                            "spectrum": t.source} for t in group.tests],
+                 "notes": lab.notes},
+        "method": {"design": "reference group", "folds": "test",
+                   "heldout_sets": [f"{t.direction}@{t.level:g}" for t in group.tests],
+                   "null_factor": NULL_FACTOR, "min_gain": MIN_GAIN,
+                   "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
+                   "model_floor": MODEL_FLOOR,
+                   "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "
+                                   "cells",
+                   "candidates": names},
+    }
+    return report, cells_before, cells_after
