@@ -121,6 +121,20 @@ def test_profiled_scatter_gives_the_chi2_of_the_full_covariance():
     assert chi(along) < 0.2 * chi(across)
 
 
+def test_candidates_without_held_out_gain_have_no_rank_for_top3():
+    from ehm_drake.gap.blind import score
+
+    ranking = [{"effect": "seat_friction", "heldout_gain": 40.0, "gap_reduction_heldout": 0.1},
+               {"effect": "reflex_delay", "heldout_gain": 0.0, "gap_reduction_heldout": 0.0},
+               {"effect": "arms", "heldout_gain": -5.0, "gap_reduction_heldout": -0.1}]
+    report = {"verdict": "unexplained", "best_effect": None, "ranking": ranking,
+              "gap_before": {"heldout": 0.2}}
+    sc = score({"reflex_delay": 0.8}, report, True, reality=True)
+    assert sc["ranking_top3"] == ["seat_friction"] and not sc["top3"]
+    sc = score({"seat_friction": 0.8}, report, True, reality=True)
+    assert sc["top3"] and not sc["top1"]
+
+
 def test_cli_reference_errors(tmp_path, capsys):
     """A reference folder without subject data, or too few subjects: a
     one-line message and exit status 2, before any model work."""

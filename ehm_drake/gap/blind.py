@@ -236,7 +236,11 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
     sp = report.get("structural") or {}
     structural = bool(sp.get("ran"))
     entries = sp["ranking"] if structural else report["ranking"]
-    ranking = [e["effect"] for e in entries]
+    # Against a reference group, a candidate that gains less than one unit
+    # of held-out chi^2 (its effect fitted off, up to round-off) has no
+    # rank: such ties keep the candidate list's order and would count for
+    # top-3 by chance.
+    ranking = [e["effect"] for e in entries if e.get("heldout_gain", 2.0) > 1.0]
     predicted = report.get("best_effect") if verdict in ("explained", "ambiguous") else None
     label_pred = predicted or verdict
     red = [e["effect_share" if structural else "gap_reduction_heldout"] for e in entries
