@@ -135,6 +135,26 @@ def test_candidates_without_held_out_gain_have_no_rank_for_top3():
     assert sc["top3"] and not sc["top1"]
 
 
+def test_a_diverging_twin_leaves_the_trial_detectable(tmp_path, monkeypatch):
+    from ehm_drake.gap import blind
+    from ehm_drake.realities import RealityError
+
+    def diverge(*args):
+        raise RealityError("spine5 diverged at t = 3.000 s: pelvis moved 30 cm")
+    monkeypatch.setattr(blind, "_synthesize_once", diverge)
+    spec = blind.BlindSpec(trials=1, seed=5, reality="spine5")
+    res = {"hidden": {"arms": 0.8}}
+    report = {"verdict": "unexplained", "best_effect": None, "ranking": [],
+              "gap_before": {"heldout": 0.2}}
+    key = {"effects": {"arms": {}}, "seed": 1, "levels_rms": [0.3], "directions": "z",
+           "duration_s": 30.0}
+    blind._judge(res, tmp_path / "data", key, report, spec,
+                 (tmp_path / "twin", tmp_path / "twin.json"))
+    assert res["detectability"]["detectable"] and "diverged" in \
+        res["detectability"]["twin_error"]
+    assert res["score"]["detectable"] and not res["score"]["top1"]
+
+
 def test_cli_reference_errors(tmp_path, capsys):
     """A reference folder without subject data, or too few subjects: a
     one-line message and exit status 2, before any model work."""

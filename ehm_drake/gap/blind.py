@@ -456,10 +456,15 @@ def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
         det = {"detectable": False, "effects": {}}
     else:
         folder, twin_key = twin
-        _synthesize_once(SynthSpec({}, key["seed"], tuple(key["levels_rms"]), key["directions"],
-                                   key["duration_s"], reality=spec.reality),
-                         folder, twin_key, spec.workers)
-        det = twin_detectability(data, folder)
+        try:
+            _synthesize_once(SynthSpec({}, key["seed"], tuple(key["levels_rms"]),
+                                       key["directions"], key["duration_s"],
+                                       reality=spec.reality), folder, twin_key, spec.workers)
+            det = twin_detectability(data, folder)
+        except RealityError as e:
+            # No twin (the reality diverged without the effect): the trial
+            # counts as detectable, the stricter choice, and says why.
+            det = {"detectable": True, "effects": {}, "twin_error": str(e)}
     res["detectability"] = det
     res["score"] = score(res["hidden"], report, det["detectable"],
                          spec.reality != MODEL_REALITY)
