@@ -90,6 +90,11 @@ def test_protocol_checks():
     other = _lab(lambda f, lv, ch: np.ones(len(f), complex), tests=(("x", 0.3), ("x", 0.6)))
     with pytest.raises(DiagnosisError, match="one protocol"):
         ReferenceGroup.from_labs([*labs, other])
+    # A subject with a zero gain: a clear error before any model work.
+    from ehm_drake.gap.reference import diagnose_with_reference
+    bad = _lab(lambda f, lv, ch: np.where(f > 6, 0.0, 1.0) + 0j, name="bad")
+    with pytest.raises(DiagnosisError, match="zero or non-finite"):
+        diagnose_with_reference(bad, g, progress=False)
     # A subject with the rows in another order aligns row for row.
     lab = labs[2]
     perm = np.random.default_rng(1).permutation(len(lab.rows))

@@ -364,7 +364,8 @@ class _Scorer:
         the group's rows); per-row chi^2 before and after, on all rows and
         held out per test."""
         K = group.size
-        sw = 1.0 / np.sqrt(group.variance * (1 + 1 / K))
+        # (Floored: identical subjects would give infinite weights.)
+        sw = 1.0 / np.sqrt(np.maximum(group.variance, 1e-12) * (1 + 1 / K))
         A_all = group.deviations.T * math.sqrt((1 + 1 / K) / (K - 1)) * sw[:, None]
 
         def rows_chi(x, train, where):
@@ -514,6 +515,9 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
         load_reference(reference, channels)
     lab = data if isinstance(data, LabData) else load_lab_data(data, channels)
     idx = group.align(lab)
+    H = lab.rows.H[idx]
+    if np.any(~np.isfinite(H)) or np.any(H == 0):
+        raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in the data")
     Progress("diagnose", enabled=progress).say(
         f"reference group of {group.size} subjects, {len(group.rows)} rows, "
         f"{len(group.tests)} tests; {len(names)} candidates")
@@ -543,7 +547,7 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     anchor_key = hashlib.sha256(json.dumps(anchor["log_scales"]).encode()).hexdigest()[:16]
     nulls = null_gains(group, families, slope, base_names, names, workers,
                        lambda done, total: null_prog.update(done), use_cache, anchor_key)
-    residual = _wrap(np.log(lab.rows.H[idx]) - group.mean_log)
+    residual = _wrap(np.log(H) - group.mean_log)
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
              "names": names, "residual": residual}
     fit_prog = Progress("diagnose: candidates", len(names) + 1, progress, unit="fitted")
