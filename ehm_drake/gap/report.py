@@ -159,11 +159,18 @@ def markdown(rep: dict, figures: list[str]) -> str:
     lines += ["", "## Method", "",
               f"Held-out sets ({m.get('folds')}): {', '.join(m.get('heldout_sets', []))}. "
               f"Significance: {m.get('significance')}; model floor "
-              f"{m.get('model_floor')}. Explained when the best candidate lowers the "
-              f"held-out chi^2 by more than its parameter penalty (delta BIC < 0) and removes "
-              f">= {_pct(m.get('explained_reduction'))} of the held-out gap; ambiguous when "
-              f"another candidate comes within {_pct(m.get('ambiguity_margin'))} and the level "
-              "evidence does not separate them.", ""]
+              f"{m.get('model_floor')}. " + (
+                  f"Explained when a candidate's held-out chi^2 gain exceeds "
+                  f"{m.get('null_factor')} times the largest it reaches on the reference "
+                  f"group's own subjects (leave one out) and {m.get('min_gain')}; the largest "
+                  f"such gain is named; ambiguous when another named one comes within "
+                  f"{_pct(m.get('ambiguity_margin'))} of its held-out share."
+                  if m.get("design") == "reference group" else
+                  f"Explained when the best candidate lowers the held-out chi^2 by more than "
+                  f"its parameter penalty (delta BIC < 0) and removes >= "
+                  f"{_pct(m.get('explained_reduction'))} of the held-out gap; ambiguous when "
+                  f"another candidate comes within {_pct(m.get('ambiguity_margin'))} and the "
+                  "level evidence does not separate them."), ""]
     t = rep.get("timing_s")
     if t:
         lines.append(f"Run time {t['total']:.0f} s ({t['families']:.0f} s linear families, "
