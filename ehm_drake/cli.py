@@ -31,7 +31,7 @@ import numpy as np
 from .cli_common import UsageError, int_at_least, positive_float, prepare_output_dir
 from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
-from .params import VARIANTS, ParameterError, load_params
+from .params import VARIANTS, ParameterError, load_params, with_design
 from .signals import KINDS, PAPER_RMS, SignalError
 from .sweep import add_sweep_arguments
 from .viz import add_viz_arguments, handle_viz
@@ -66,12 +66,23 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="sitting height (m); default scales with stature")
     p.add_argument("--contact", choices=("point", "hydroelastic"),
                    help="contact model (default: from the parameters, point)")
+    p.add_argument("--design", choices=("reference", "implicit"),
+                   help="joint design (default: from the parameters, reference): reference "
+                   "= the paper's spherical joints, feedback explicit, 1 ms step; implicit = "
+                   "Cardan joint chains, stiff feedback in the implicit solve, 5 ms step, about "
+                   "4x faster (README \"Two designs\")")
+    p.add_argument("--time-step", type=positive_float("--time-step"), metavar="S",
+                   help="simulation time step in seconds (default: the parameters', or the "
+                   "design's own when --design changes it: reference 0.001, implicit 0.005)")
 
 
 def _load_model_params(args):
     params = load_params(args.params)
     if getattr(args, "contact", None):
         params.contact.model = args.contact
+    design, step = getattr(args, "design", None), getattr(args, "time_step", None)
+    if design is not None or step is not None:
+        params = with_design(params, design, step)
     return params
 
 
@@ -116,6 +127,8 @@ def cmd_simulate(args) -> int:
         "sitting_height_m": measures.resolved_sitting_height(),
         "variant": args.variant,
         "contact_model": params.contact.model,
+        "design": s.design,
+        "time_step_s": s.time_step_s,
         "excitation": signal.meta,
         "seat_rms_measured": dict(zip("xyz", map(float, signal.rms()), strict=True)),
         "real_time_factor": result.meta["real_time_factor"],
@@ -164,7 +177,9 @@ def _peaks(frf) -> dict:
 
 def _print_summary(summary: dict) -> None:
     print(f"\nEHM seated human, {summary['dof']} DoF, {summary['mass_kg']:.1f} kg, "
-          f"variant {summary['variant']}, real-time factor {summary['real_time_factor']:.2f}")
+          f"variant {summary['variant']}, {summary['design']} design at "
+          f"{1e3 * summary['time_step_s']:g} ms, real-time factor "
+          f"{summary['real_time_factor']:.2f}")
     e = summary["settle_posture_error_deg"]
     print("settled posture error (deg): " + ", ".join(f"{k} {v:.2f}" for k, v in e.items()))
     print(f"head pitch drift {summary['head_pitch_drift_deg']:.2f} deg, backrest force "
