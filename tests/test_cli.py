@@ -148,11 +148,12 @@ def test_design_and_time_step_options(tmp_path, capsys):
     assert (q.simulation.design, q.simulation.time_step_s) == ("implicit", 0.005)
     assert p.simulation.design == "reference"  # the caller's parameters untouched
     # A step given in the parameters on that design is kept.
-    assert with_design(with_design(p, "implicit", 0.004), "implicit").simulation.time_step_s \
-        == 0.004
+    assert with_design(with_design(p, "implicit", 0.0025), "implicit").simulation.time_step_s \
+        == 0.0025
     assert with_design(q, "reference").simulation.time_step_s == 0.001
     # Steps the output rate or the range forbid: one line, exit 2.
-    for step, match in (("0.006", "output_rate_hz"), ("5", "seconds")):
+    for step, match in (("0.006", "output_rate_hz"), ("0.002", "whole number of time steps"),
+                        ("5", "seconds")):
         code = main(["simulate", "--design", "implicit", "--time-step", step, "--out",
                      str(tmp_path / "o"), "--quiet"])
         err = capsys.readouterr().err

@@ -115,6 +115,9 @@ def test_variants(params):
     ("rate.yaml", "simulation:\n  time_step_s: 0.002\n  output_rate_hz: 1000\n",
      "rate.yaml: simulation.output_rate_hz = 1000.0: allowed 100..500 Hz "
      "(at least 100 Hz, at most the simulation rate 1/simulation.time_step_s)"),
+    ("period.yaml", "simulation:\n  design: implicit\n  time_step_s: 0.002\n",
+     "period.yaml: simulation.output_rate_hz = 200: the output period must be a whole number "
+     "of time steps (0.002 s); it is 2.5 steps"),
     ("pair.yaml", "contact:\n  thighs_pan: {stiffness: 0}\n",
      "pair.yaml: contact.thighs_pan.stiffness = 0.0: allowed > 0 N/m "
      "(a contact pair without stiffness does not carry the body)"),
