@@ -140,6 +140,36 @@ def test_candidates_without_held_out_gain_have_no_rank_for_top3():
     assert sc["top3"] and not sc["top1"]
 
 
+def test_a_reality_is_judged_against_its_own_bar():
+    """On an independent reality: top-1 >= 75%, top-3 >= 90%, false alarms
+    <= 10%, at least 30 scored trials, no held-out share required; on the
+    model itself: 80 / 95 / 10 and a 70% held-out share."""
+    from ehm_drake.gap.blind import markdown, summarize
+
+    def trial(i, hit, effect=True, in_top3=False):
+        return {"trial": i, "hidden": {"arms": 1.0} if effect else {}, "score": {
+            "detectable": effect, "has_effect": effect, "top1": hit, "top3": hit or in_top3,
+            "false_alarm": False, "heldout_reduction_true": 0.2 if effect else None,
+            "truth_label": "arms" if effect else "none", "verdict": "explained",
+            "predicted_label": "arms" if hit else "unexplained", "ranking_top3": ["arms"]}}
+    # 39 of 50 detectable trials right (78%), 46 in the top 3 (92%), 5
+    # no-effect trials without alarm.
+    results = [trial(i, i < 39, in_top3=i < 46) for i in range(50)] + [
+        trial(50 + i, False, False) for i in range(5)]
+    on_reality = summarize(results, "spine5")
+    assert on_reality["top1"] == pytest.approx(0.78)
+    assert on_reality["passed"] and "heldout_reduction" not in on_reality["acceptance"]
+    on_model = summarize(results)
+    assert not on_model["acceptance"]["top1"] and not on_model["acceptance"]["heldout_reduction"]
+    assert not on_model["passed"]
+    # Too few trials on a reality fails, whatever the rates.
+    short = summarize(results[:20] + results[-5:], "lumped")
+    assert short["acceptance"] == {"top1": True, "top3": True, "false_alarm": True,
+                                   "trials": False}
+    md = markdown(on_reality, results)
+    assert "| scored trials | 55 | >= 30 |" in md and ">= 75%" in md and ">= 90%" in md
+
+
 def test_a_diverging_twin_leaves_the_trial_detectable(tmp_path, monkeypatch):
     from ehm_drake.gap import blind
     from ehm_drake.realities import RealityError

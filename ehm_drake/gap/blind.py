@@ -49,8 +49,18 @@ from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 #: backrest_separation leaves no significant gap even at strength 1, and
 #: seat_friction only at the top of it.
 DETECTABLE_STRENGTH = (0.6, 1.0)
-#: Acceptance of the issue (fractions).
+#: Acceptance of the issue (fractions) on data made by the model itself.
 ACCEPTANCE = {"top1": 0.80, "top3": 0.95, "false_alarm": 0.10, "heldout_reduction": 0.70}
+#: Acceptance on an independent reality (issue "Gap diagnosis on data from a
+#: body that is not the model"): no held-out share required, at least 30
+#: scored trials.
+ACCEPTANCE_REALITY = {"top1": 0.75, "top3": 0.90, "false_alarm": 0.10,
+                      "heldout_reduction": None, "trials": 30}
+
+
+def acceptance_for(reality: str = MODEL_REALITY) -> dict:
+    """The acceptance bar of a blind run on `reality`."""
+    return ACCEPTANCE if reality == MODEL_REALITY else ACCEPTANCE_REALITY
 
 
 class BlindError(ValueError):
@@ -265,7 +275,9 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
     }
 
 
-def summarize(results: list[dict]) -> dict:
+def summarize(results: list[dict], reality: str = MODEL_REALITY) -> dict:
+    """Scores of a blind run's trial results, judged against `reality`'s bar."""
+    bar = acceptance_for(reality)
     skipped = [r for r in results if "skipped" in r]
     results = [r for r in results if "skipped" not in r]
     det = [r for r in results if r["score"]["detectable"]]
@@ -297,13 +309,18 @@ def summarize(results: list[dict]) -> dict:
         "heldout_reduction_median": float(np.median(red)) if red else None,
         "confusion": conf,
     }
+    m["acceptance_bar"] = bar
     m["acceptance"] = {
-        "top1": m["top1"] is not None and m["top1"] >= ACCEPTANCE["top1"],
-        "top3": m["top3"] is not None and m["top3"] >= ACCEPTANCE["top3"],
-        "false_alarm": m["false_alarm"] is None or m["false_alarm"] <= ACCEPTANCE["false_alarm"],
-        "heldout_reduction": m["heldout_reduction_mean"] is not None and
-        m["heldout_reduction_mean"] >= ACCEPTANCE["heldout_reduction"],
+        "top1": m["top1"] is not None and m["top1"] >= bar["top1"],
+        "top3": m["top3"] is not None and m["top3"] >= bar["top3"],
+        "false_alarm": m["false_alarm"] is None or m["false_alarm"] <= bar["false_alarm"],
     }
+    if bar["heldout_reduction"] is not None:
+        m["acceptance"]["heldout_reduction"] = (m["heldout_reduction_mean"] is not None and
+                                                m["heldout_reduction_mean"]
+                                                >= bar["heldout_reduction"])
+    if bar.get("trials"):
+        m["acceptance"]["trials"] = m["trials"] >= bar["trials"]
     m["passed"] = all(m["acceptance"].values())
     return m
 
@@ -395,7 +412,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         prog.step(f"trial {k + 1}: hidden {s['truth_label']} -> {s['verdict']} "
                   f"{s['predicted_label']} ({'ok' if ok else 'MISS'}"
                   f"{'' if s['detectable'] or not s['has_effect'] else ', not detectable'})")
-    summary = summarize(results)
+    summary = summarize(results, spec.reality)
     summary["settings"] = settings
     (out / "blind.json").write_text(json.dumps({"summary": summary, "trials": results},
                                                indent=1) + "\n")
@@ -476,6 +493,10 @@ def _p(x) -> str:
 
 def markdown(summary: dict, results: list[dict]) -> str:
     s = summary
+    bar = s.get("acceptance_bar", ACCEPTANCE)
+
+    def at_least(key):
+        return "-" if bar.get(key) is None else f">= {_p(bar[key])}"
     lines = [f"# Blind check: {s['trials']} trials ({s['effect_trials']} with hidden effects, "
              f"{s['detectable_trials']} of them detectable; {s['no_effect_trials']} without)",
              *(["", f"{len(s['skipped_trials'])} more trials skipped: the reality's "
@@ -485,17 +506,17 @@ def markdown(summary: dict, results: list[dict]) -> str:
                 f"{s['settings']['references']} subjects (`diagnose --reference`)."]
                if s.get("settings", {}).get("references") else []),
              "", "| metric | value | acceptance |", "|---|---|---|",
-             f"| top-1 accuracy (detectable trials) | {_p(s['top1'])} | >= "
-             f"{_p(ACCEPTANCE['top1'])} |",
-             f"| top-3 accuracy (detectable trials) | {_p(s['top3'])} | >= "
-             f"{_p(ACCEPTANCE['top3'])} |",
+             *([f"| scored trials | {s['trials']} | >= {bar['trials']} |"]
+               if bar.get("trials") else []),
+             f"| top-1 accuracy (detectable trials) | {_p(s['top1'])} | {at_least('top1')} |",
+             f"| top-3 accuracy (detectable trials) | {_p(s['top3'])} | {at_least('top3')} |",
              f"| top-1 accuracy (all effect trials) | {_p(s['top1_all_effect_trials'])} "
              f"| - |",
              f"| false alarms (no-effect trials) | {_p(s['false_alarm'])} | <= "
-             f"{_p(ACCEPTANCE['false_alarm'])} |",
+             f"{_p(bar['false_alarm'])} |",
              f"| held-out gap removed by the true effect (mean / median) | "
-             f"{_p(s['heldout_reduction_mean'])} / {_p(s['heldout_reduction_median'])} | >= "
-             f"{_p(ACCEPTANCE['heldout_reduction'])} |", "",
+             f"{_p(s['heldout_reduction_mean'])} / {_p(s['heldout_reduction_median'])} | "
+             f"{at_least('heldout_reduction')} |", "",
              "## Confusion matrix (rows: hidden truth; columns: diagnosis)", ""]
     cols = sorted({p for row in s["confusion"].values() for p in row})
     lines.append("| truth \\ diagnosis | " + " | ".join(cols) + " |")
