@@ -320,7 +320,8 @@ def _reference_force_systems(builder, hp: HumanPlant, params: ModelParams, h: fl
     restraints = builder.AddNamedSystem(
         "shear_restraints",
         ShearRestraints(plant, points, _restraint_vector(params, points, hp.extensions), h,
-                        hp.restraint_constraints, contact_explicit_damping(params, points)))
+                        hp.restraint_constraints,
+                        contact_explicit_damping(params, points, hp.moving_seat_parts)))
     # Head-in-space control.
     gain = 1.0 if params.his.enabled else 0.0
     his = builder.AddNamedSystem(
@@ -353,7 +354,8 @@ def _force_laws(hp: HumanPlant, params: ModelParams, h: float, feedback_input: b
         his=("head", "upper_torso", gain * np.array(params.his.kp),
              gain * np.array(params.his.kd)),
         restraints=(points, _restraint_vector(params, points, hp.extensions),
-                    hp.restraint_constraints, contact_explicit_damping(params, points)),
+                    hp.restraint_constraints,
+                    contact_explicit_damping(params, points, hp.moving_seat_parts)),
         inertial_instances=[hp.human, hp.seat], period=h, feedback_input=feedback_input)
 
 

@@ -204,6 +204,81 @@ def test_every_effect_runs_in_the_time_domain(settled_effects):
         assert 0.3 * head_ref < np.std(head) < 3.0 * head_ref, name
 
 
+@pytest.mark.slow
+def test_every_effect_acts_the_same_on_the_implicit_design(settled_effects):
+    """Each effect's change of the 30 body channels (the run with it less
+    the run without it, 2 s of z excitation) on the implicit design at its
+    5 ms step is the reference design's: correlation > 0.98, size within
+    10%.  Before the fixes, the cushion's was 0.70 of it (the explicit half
+    of the pan contacts' damping acted on the body's absolute velocity, not
+    relative to the moving cushion) and the reflex delay's 1.20 (a
+    30 ms delay was 35 ms at 5 ms)."""
+    from ehm_drake.params import with_design
+    from ehm_drake.signals import make_seat_signal, signal_from_samples
+    from ehm_drake.simulation import settle, vibrate
+
+    p, st = settled_effects
+    q = with_design(p, "implicit")
+    sig = make_seat_signal("random", "z", 0.6, 2.0, 3, p.simulation.time_step_s, 0.5, 0.5)
+    k0 = int(round(sig.settle_time / sig.time_step))
+    sig_q = signal_from_samples(sig.times[k0:] - sig.times[k0], sig.acceleration[k0:],
+                                q.simulation.time_step_s, 0.5, 0.0)
+
+    def channels(name, params, settled, signal):
+        effects = None if name == "none" else {name: effect_values(name, 1.0)}
+        return vibrate(params, settled, signal, effects=effects).channels
+
+    ref_none = channels("none", p, st["none"], sig)
+    q_none = channels("none", q, settle(q, settle_time=0.5), sig_q)
+    assert ref_none.shape == q_none.shape
+    judged = []
+    for name in EFFECT_NAMES:
+        a = channels(name, p, st[name], sig) - ref_none
+        q_settled = settle(q, settle_time=0.5, effects={name: effect_values(name, 1.0)})
+        b = channels(name, q, q_settled, sig_q) - q_none
+        if np.linalg.norm(a) < 0.005 * np.linalg.norm(ref_none - ref_none[0]):
+            continue  # no change worth comparing under z (friction, backrest)
+        judged.append(name)
+        corr = np.sum(a * b) / (np.linalg.norm(a) * np.linalg.norm(b))
+        assert corr > 0.98, (name, corr)
+        assert np.linalg.norm(b) / np.linalg.norm(a) == pytest.approx(1.0, abs=0.1), name
+    assert {"reflex_delay", "seat_cushion_dynamics", "arms"} <= set(judged)
+
+
+def test_a_delay_of_n_steps_lags_the_plant_state_by_n_steps():
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+    from pydrake.systems.primitives import (
+        Multiplexer,
+        TrajectorySource,
+        VectorLogSink,
+        ZeroOrderHold,
+    )
+    from pydrake.trajectories import PiecewisePolynomial
+
+    from ehm_drake.gap.effects import delay_system
+
+    h = 0.005
+    for steps in (1, 2, 6):
+        b = DiagramBuilder()
+        ramp = b.AddSystem(TrajectorySource(PiecewisePolynomial.FirstOrderHold(
+            [0.0, 1.0], np.array([[0.0, 1.0]]))))
+        state = b.AddSystem(ZeroOrderHold(h, 1))  # a discrete state, as the plant's
+        delay = b.AddSystem(delay_system(steps, h, 1))
+        mux = b.AddSystem(Multiplexer([1, 1]))
+        log = b.AddSystem(VectorLogSink(2, h))
+        b.Connect(ramp.get_output_port(), state.get_input_port())
+        b.Connect(state.get_output_port(), delay.get_input_port())
+        b.Connect(state.get_output_port(), mux.get_input_port(0))
+        b.Connect(delay.get_output_port(), mux.get_input_port(1))
+        b.Connect(mux.get_output_port(), log.get_input_port())
+        sim = Simulator(b.Build())
+        sim.AdvanceTo(0.2)
+        x = log.FindLog(sim.get_context()).data()
+        lag = x[0, 20:] - x[1, 20:]  # the ramp's value is its time
+        assert np.allclose(lag, steps * h, atol=1e-12), (steps, lag[:3])
+
+
 # ---------------------------------------------------------------------------
 # Equivalent linearization of slipping restraints (Maxwell element)
 # ---------------------------------------------------------------------------

@@ -90,6 +90,7 @@ from .stepping import (
     STABLE_OMEGA_H,
     central_limit,
     implicit_springs,
+    sap_damping,
     segment_frequencies,
     step_damping,
     step_split,
@@ -230,6 +231,8 @@ class HumanPlant:
     #: Implicit design: the shear restraints' springs and SAP's part of their
     #: dampers as compliant distance constraints (`model.restraints`).
     restraint_constraints: RestraintConstraints | None = None
+    #: Seat parts on a link that moves relative to the seat (`moving_seat_parts`).
+    moving_seat_parts: frozenset = frozenset()
     effects: dict = field(default_factory=dict)
     #: The resolved extensions of `effects`, in registration order.
     extensions: tuple[ModelExtension, ...] = ()
@@ -336,6 +339,8 @@ def add_seated_human(
         restraint_constraints=(RestraintConstraints.of(plant, constraint_ids,
                                                        params.simulation.time_step_s)
                                if constraint_ids else None),
+        moving_seat_parts=moving_seat_parts(plant, seat, seat_geoms,
+                                            scene_graph.model_inspector()),
         effects=effects,
         extensions=extensions,
     )
@@ -591,7 +596,8 @@ def _hydroelastic_modulus(k: float, semi_axes, load: float) -> float:
     return k * k * c * c / (4.0 * math.pi * a * b * load)
 
 
-def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weight: float):
+def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weight: float,
+                            seat_part_moves: bool = False):
     """ProximityProperties of a body ellipsoid of contact pair `pair`."""
     cp = getattr(params.contact, pair)
     props = ProximityProperties()
@@ -606,9 +612,13 @@ def body_contact_properties(params: ModelParams, pair: str, semi_axes, body_weig
     # contact force is implicit, k (x + tau xdot) at the step's end; on the
     # implicit design tau carries SAP's part of the damping, less the h k of
     # its implicit spring, and `ShearRestraints` the explicit part
-    # (`model.stepping`).
+    # (`model.stepping`).  Against a seat part that moves (a cushion link),
+    # SAP carries the whole damper: the explicit part, applied at the body
+    # point's velocity in S, would damp the body's absolute motion instead
+    # of its motion relative to the part.
+    split = sap_damping if seat_part_moves else step_damping
     props.AddProperty("material", "relaxation_time",
-                      float(step_damping(params, cp.damping, cp.stiffness)) / cp.stiffness)
+                      float(split(params, cp.damping, cp.stiffness)) / cp.stiffness)
     if params.contact.model == "hydroelastic":
         load = NOMINAL_LOAD_SHARE[pair] * body_weight
         AddCompliantHydroelasticProperties(
@@ -642,6 +652,18 @@ def _collision_geometries(plant, scene_graph, instance) -> dict[str, object]:
     return out
 
 
+def moving_seat_parts(plant, seat, seat_geometries: dict, inspector) -> frozenset[str]:
+    """The seat parts whose geometry sits on a link that moves relative to
+    the seat (a joint with degrees of freedom: the `seat_cushion_dynamics`
+    cushion); the others are fixed in S."""
+    moving_bodies = {plant.get_joint(j).child_body().index()
+                     for j in plant.GetJointIndices(seat)
+                     if plant.get_joint(j).num_velocities() > 0}
+    return frozenset(part for part, gid in seat_geometries.items()
+                     if plant.GetBodyFromFrameId(inspector.GetFrameId(gid)).index()
+                     in moving_bodies)
+
+
 def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body):
     inspector = scene_graph.model_inspector()
     source = plant.get_source_id()
@@ -650,12 +672,13 @@ def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body)
     seat_geoms = _collision_geometries(plant, scene_graph, seat)
     body_geoms = {}
     allowed = set()
+    moving = moving_seat_parts(plant, seat, seat_geoms, inspector)
     for pair, (names, part) in CONTACT_PAIRS.items():
         for name in names:
             gid = geoms[name]
             shape = inspector.GetShape(gid)
             props = body_contact_properties(params, pair, (shape.a(), shape.b(), shape.c()),
-                                            body_weight)
+                                            body_weight, part in moving)
             scene_graph.AssignRole(source, gid, props, RoleAssign.kReplace)
             body_geoms[name] = (gid, pair)
             allowed.add((name, part))

@@ -140,6 +140,18 @@ def step_damping(params: ModelParams, damping, implicit_stiffness=0.0) -> np.nda
     return step_split(params, damping, implicit_stiffness)[0]
 
 
+def sap_damping(params: ModelParams, damping, implicit_stiffness=0.0) -> np.ndarray:
+    """The whole of a damper given to SAP, less the h k its implicit spring
+    adds on the implicit design (first-order accurate): for a damper whose
+    explicit part could not be applied at the right velocity (a contact on
+    a seat part that moves, whose velocity the explicit laws do not read)."""
+    c = np.asarray(damping, float)
+    if params.simulation.design != "implicit":
+        return c
+    return np.maximum(c - params.simulation.time_step_s * np.asarray(implicit_stiffness, float),
+                      0.0)
+
+
 def central_limit(damping, implicit_stiffness) -> np.ndarray:
     """The largest step (s) at which `step_split` need not clip SAP's part
     of a damper whose spring SAP integrates, c / (2 k): beyond it that

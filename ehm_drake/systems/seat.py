@@ -33,7 +33,7 @@ from ..model.restraints import (  # noqa: F401  (re-exported: the seat's parts a
     restraint_points,
 )
 from ..model.stepping import step_split
-from ..params import ModelParams
+from ..params import CONTACT_PAIRS, ModelParams
 from . import SCALARS, PlantScratch
 
 #: Blocks of the packed parameter vector of ShearRestraints (n values each).
@@ -74,10 +74,15 @@ def restraint_parameters(params: ModelParams, points, gated_parts=(), cubic=None
                            per_point(friction), [x.stiffness for x in c]])
 
 
-def contact_explicit_damping(params: ModelParams, points) -> np.ndarray:
+def contact_explicit_damping(params: ModelParams, points,
+                             moving_parts: frozenset = frozenset()) -> np.ndarray:
     """Per restraint point, the explicit part of its contact pair's damping
-    (N s/m; `step_split`: zero on the reference design)."""
-    return np.array([float(step_split(params, getattr(params.contact, p.pair).damping,
+    (N s/m; `step_split`: zero on the reference design, and against a seat
+    part in `moving_parts`, whose contact damping SAP carries whole: the
+    explicit part acts at the point's velocity in S, not relative to the
+    part)."""
+    return np.array([0.0 if CONTACT_PAIRS[p.pair][1] in moving_parts else
+                     float(step_split(params, getattr(params.contact, p.pair).damping,
                                       getattr(params.contact, p.pair).stiffness)[1])
                      for p in points])
 
