@@ -28,78 +28,13 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
-from pydrake.systems.framework import DiagramBuilder, EventStatus
-from pydrake.systems.primitives import TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
+from bench_simulate import closed_loop_forces, replay  # this folder (run as a script)
 
-from ehm_drake.diagram import build_diagram
-from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import load_params, with_design
 from ehm_drake.signals import make_seat_signal
-from ehm_drake.simulation import StateMap, set_normal_reference, settle
-
-
-def closed_loop_forces(params, duration: float):
-    """(times, forces (nv x N), positions at the end, start state) of the
-    closed loop over `duration` s of 3D excitation from the settled state."""
-    s = params.simulation
-    settled = settle(params)
-    signal = make_seat_signal("random", "xyz", 0.1941, duration + 2.0, 1, s.time_step_s,
-                              s.settle_time_s, s.onset_time_s)
-    closed = build_diagram(params, signal=signal, guard=False, seat_forces=False)
-    ctx = closed.diagram.CreateDefaultContext()
-    StateMap(closed).set(ctx, settled.state)
-    set_normal_reference(closed, ctx)
-    ctx.SetTime(signal.settle_time)
-    pc = closed.plant_context(ctx)
-    applied = closed.plant.get_applied_generalized_force_input_port()
-    x_start = closed.plant.GetPositionsAndVelocities(pc).copy()
-    times, forces = [], []
-
-    def record(context):
-        times.append(context.get_time())
-        forces.append(applied.Eval(pc).copy())
-        return EventStatus.Succeeded()
-
-    sim = Simulator(closed.diagram, ctx)
-    sim.set_monitor(record)
-    sim.Initialize()
-    sim.AdvanceTo(signal.settle_time + duration)
-    return (np.array(times), np.array(forces).T, closed.plant.GetPositions(pc).copy(), x_start)
-
-
-def replay(params, times, F, x_start, time_step: float, accuracy: float | None = None):
-    """(real-time factor, steps, end positions) of the plant alone replaying F."""
-    p = params.copy()
-    p.simulation.time_step_s = time_step
-    builder = DiagramBuilder()
-    hp = add_seated_human(builder, p)
-    h = params.simulation.time_step_s
-    traj = (PiecewisePolynomial.FirstOrderHold(times, F) if time_step == 0 else
-            PiecewisePolynomial.ZeroOrderHold(np.append(times, times[-1] + h),
-                                              np.hstack([F, F[:, -1:]])))
-    source = builder.AddSystem(TrajectorySource(traj))
-    builder.Connect(source.get_output_port(), hp.plant.get_applied_generalized_force_input_port())
-    diagram = builder.Build()
-    root = diagram.CreateDefaultContext()
-    root.SetTime(times[0])
-    pc = hp.plant.GetMyMutableContextFromRoot(root)
-    hp.plant.SetPositionsAndVelocities(pc, x_start)
-    sim = Simulator(diagram, root)
-    if accuracy is not None:
-        ApplySimulatorConfig(SimulatorConfig(integration_scheme="cenic", accuracy=accuracy,
-                                             max_step_size=0.01, use_error_control=True), sim)
-    sim.Initialize()
-    t0 = time.perf_counter()
-    sim.AdvanceTo(times[-1])
-    wall = time.perf_counter() - t0
-    steps = (sim.get_integrator().get_num_steps_taken() if accuracy is not None
-             else int(round((times[-1] - times[0]) / time_step)))
-    return (times[-1] - times[0]) / wall, steps, wall, hp.plant.GetPositions(pc).copy()
+from ehm_drake.simulation import settle
 
 
 def main() -> None:
@@ -112,8 +47,11 @@ def main() -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
     params = with_design(load_params(), args.design)
-    h = params.simulation.time_step_s
-    times, F, q_end, x_start = closed_loop_forces(params, args.duration)
+    s = params.simulation
+    h = s.time_step_s
+    signal = make_seat_signal("random", "xyz", 0.1941, args.duration + 2.0, 1, h,
+                              s.settle_time_s, s.onset_time_s)
+    times, F, q_end, x_start = closed_loop_forces(params, settle(params), signal, args.duration)
     print(f"{args.design} design; the plant alone replaying {args.duration:g} s of the closed "
           f"loop's forces (3D excitation)")
     routes = [(f"discrete SAP, {h * 1e3:g} ms", h, None)] + [

@@ -22,7 +22,7 @@ import os
 import time
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator, SimulatorConfig
 from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
@@ -59,10 +59,10 @@ def plant_only_real_time_factor(params, settled, duration: float = 5.0) -> float
     return duration / (time.perf_counter() - t0)
 
 
-def plant_replay_real_time_factor(params, settled, signal, duration: float = 5.0) -> float:
-    """Real-time factor of the plant alone replaying the generalized forces
-    the closed loop applies during the first `duration` s of `signal`."""
-    h = params.simulation.time_step_s
+def closed_loop_forces(params, settled, signal, duration: float):
+    """(times, generalized forces (nv x N), end positions, start state) of
+    the closed loop during the first `duration` s of `signal` from
+    `settled`, the forces as the plant received them at each step."""
     closed = build_diagram(params, signal=signal, guard=False, seat_forces=False)
     ctx = closed.diagram.CreateDefaultContext()
     StateMap(closed).set(ctx, settled.state)
@@ -82,21 +82,51 @@ def plant_replay_real_time_factor(params, settled, signal, duration: float = 5.0
     sim.set_monitor(record)
     sim.Initialize()
     sim.AdvanceTo(signal.settle_time + duration)
-    F = np.array(forces).T
+    return np.array(times), np.array(forces).T, closed.plant.GetPositions(pc).copy(), x_start
+
+
+def replay(params, times, F, x_start, time_step: float | None = None,
+           accuracy: float | None = None):
+    """(real-time factor, steps, wall s, end positions) of the plant alone
+    replaying the forces F recorded at `times` (`closed_loop_forces`), from
+    `x_start`: on its discrete step (`time_step`, default the parameters';
+    a zero-order hold, as in the closed loop), or with `time_step` 0 as a
+    continuous plant on Drake's `cenic` at `accuracy` (a first-order hold)."""
+    h = params.simulation.time_step_s
+    p = params.copy()
+    if time_step is not None:
+        p.simulation.time_step_s = time_step
     builder = DiagramBuilder()
-    hp = add_seated_human(builder, params)
-    source = builder.AddSystem(TrajectorySource(PiecewisePolynomial.ZeroOrderHold(
-        np.append(times, times[-1] + h), np.hstack([F, F[:, -1:]]))))
+    hp = add_seated_human(builder, p)
+    continuous = p.simulation.time_step_s == 0
+    traj = (PiecewisePolynomial.FirstOrderHold(times, F) if continuous else
+            PiecewisePolynomial.ZeroOrderHold(np.append(times, times[-1] + h),
+                                              np.hstack([F, F[:, -1:]])))
+    source = builder.AddSystem(TrajectorySource(traj))
     builder.Connect(source.get_output_port(), hp.plant.get_applied_generalized_force_input_port())
     diagram = builder.Build()
     root = diagram.CreateDefaultContext()
-    root.SetTime(signal.settle_time)
-    hp.plant.SetPositionsAndVelocities(hp.plant.GetMyMutableContextFromRoot(root), x_start)
+    root.SetTime(times[0])
+    pc = hp.plant.GetMyMutableContextFromRoot(root)
+    hp.plant.SetPositionsAndVelocities(pc, x_start)
     sim = Simulator(diagram, root)
+    if continuous:
+        ApplySimulatorConfig(SimulatorConfig(integration_scheme="cenic", accuracy=accuracy,
+                                             max_step_size=0.01, use_error_control=True), sim)
     sim.Initialize()
     t0 = time.perf_counter()
-    sim.AdvanceTo(signal.settle_time + duration)
-    return duration / (time.perf_counter() - t0)
+    sim.AdvanceTo(times[-1])
+    wall = time.perf_counter() - t0
+    steps = (sim.get_integrator().get_num_steps_taken() if continuous
+             else int(round((times[-1] - times[0]) / p.simulation.time_step_s)))
+    return (times[-1] - times[0]) / wall, steps, wall, hp.plant.GetPositions(pc).copy()
+
+
+def plant_replay_real_time_factor(params, settled, signal, duration: float = 5.0) -> float:
+    """Real-time factor of the plant alone replaying the generalized forces
+    the closed loop applies during the first `duration` s of `signal`."""
+    times, F, _, x_start = closed_loop_forces(params, settled, signal, duration)
+    return replay(params, times, F, x_start)[0]
 
 
 def main() -> None:

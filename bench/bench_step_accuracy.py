@@ -41,7 +41,7 @@ import numpy as np
 
 from ehm_drake.analysis.transmissibility import transmissibility
 from ehm_drake.params import load_params, reference_design, with_design
-from ehm_drake.signals import make_seat_signal, signal_from_samples
+from ehm_drake.signals import at_time_step, make_seat_signal
 from ehm_drake.simulation import settle, vibrate
 
 BAND_HZ = (0.5, 12.0)
@@ -58,15 +58,7 @@ CONVERGED_S = 0.001
 def run(params, variant: str, signal_1ms, duration: float):
     """Settle and vibrate `params` (its own design and step) with the 1 ms
     signal's samples at the model's step.  Returns (FrfData, rtf, head pitch)."""
-    s = params.simulation
-    h = s.time_step_s
-    if abs(h - signal_1ms.time_step) < 1e-12:
-        signal = signal_1ms
-    else:
-        k0 = int(round(signal_1ms.settle_time / signal_1ms.time_step))
-        t = signal_1ms.times[k0:] - signal_1ms.times[k0]
-        signal = signal_from_samples(t, signal_1ms.acceleration[k0:], h, s.settle_time_s, 0.0)
-        signal.meta.update(signal_1ms.meta)
+    signal = at_time_step(signal_1ms, params.simulation.time_step_s)
     settled = settle(params, variant=variant)
     result = vibrate(params, settled, signal, variant=variant)
     # Every run is analysed over the same window, after the 1 ms signal's

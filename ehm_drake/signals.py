@@ -222,6 +222,20 @@ def signal_from_samples(t, acceleration, time_step: float = 1e-3, settle_time: f
                       np.vstack([np.zeros((n_settle, 3)), vib]), "csv", description, meta)
 
 
+def at_time_step(signal: SeatSignal, time_step: float) -> SeatSignal:
+    """`signal` played at another time step: its samples after the settle
+    time linearly interpolated at `time_step` (fade-in included, none added),
+    the same settle time and metadata; `signal` itself at its own step.  So
+    runs of one model at different steps see the same excitation."""
+    if abs(time_step - signal.time_step) < 1e-12:
+        return signal
+    k0 = int(round(signal.settle_time / signal.time_step))
+    out = signal_from_samples(signal.times[k0:] - signal.times[k0], signal.acceleration[k0:],
+                              time_step, signal.settle_time, 0.0)
+    out.meta.update(signal.meta)
+    return out
+
+
 def make_seat_signal(
     kind: str = "random",
     direction: str = "z",

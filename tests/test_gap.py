@@ -214,15 +214,13 @@ def test_every_effect_acts_the_same_on_the_implicit_design(settled_effects):
     relative to the moving cushion) and the reflex delay's 1.20 (a
     30 ms delay was 35 ms at 5 ms)."""
     from ehm_drake.params import with_design
-    from ehm_drake.signals import make_seat_signal, signal_from_samples
+    from ehm_drake.signals import at_time_step, make_seat_signal
     from ehm_drake.simulation import settle, vibrate
 
     p, st = settled_effects
     q = with_design(p, "implicit")
     sig = make_seat_signal("random", "z", 0.6, 2.0, 3, p.simulation.time_step_s, 0.5, 0.5)
-    k0 = int(round(sig.settle_time / sig.time_step))
-    sig_q = signal_from_samples(sig.times[k0:] - sig.times[k0], sig.acceleration[k0:],
-                                q.simulation.time_step_s, 0.5, 0.0)
+    sig_q = at_time_step(sig, q.simulation.time_step_s)
 
     def channels(name, params, settled, signal):
         effects = None if name == "none" else {name: effect_values(name, 1.0)}

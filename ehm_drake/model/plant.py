@@ -309,7 +309,8 @@ def add_seated_human(
                                  params.simulation.time_step_s)
         _add_pd_actuators(plant, human, params, stiff)
         _warn_about_the_step(params, step_damping_limits(plant, human, params, body))
-    body_geoms, seat_geoms = _set_contact_properties(plant, scene_graph, human, seat, params, body)
+    body_geoms, seat_geoms, moving_parts = _set_contact_properties(plant, scene_graph, human,
+                                                                   seat, params, body)
     constraint_ids = ()
     if design == "implicit":
         constraint_ids = add_restraint_constraints(plant, body, body_geoms,
@@ -339,8 +340,7 @@ def add_seated_human(
         restraint_constraints=(RestraintConstraints.of(plant, constraint_ids,
                                                        params.simulation.time_step_s)
                                if constraint_ids else None),
-        moving_seat_parts=moving_seat_parts(plant, seat, seat_geoms,
-                                            scene_graph.model_inspector()),
+        moving_seat_parts=moving_parts,
         effects=effects,
         extensions=extensions,
     )
@@ -665,6 +665,10 @@ def moving_seat_parts(plant, seat, seat_geometries: dict, inspector) -> frozense
 
 
 def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body):
+    """Contact materials of the body ellipsoids and seat parts, and the
+    filter letting only the listed pairs touch.  Returns the body
+    geometries, the seat geometries and the seat parts that move
+    (`moving_seat_parts`)."""
     inspector = scene_graph.model_inspector()
     source = plant.get_source_id()
     body_weight = body.total_mass * 9.81
@@ -692,4 +696,4 @@ def _set_contact_properties(plant, scene_graph, human, seat, params, body: Body)
                 manager.Apply(
                     CollisionFilterDeclaration().ExcludeBetween(GeometrySet(gid), GeometrySet(sid))
                 )
-    return body_geoms, seat_geoms
+    return body_geoms, seat_geoms, moving
