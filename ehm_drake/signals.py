@@ -227,6 +227,8 @@ def at_time_step(signal: SeatSignal, time_step: float) -> SeatSignal:
     time linearly interpolated at `time_step` (fade-in included, none added),
     the same settle time and metadata; `signal` itself at its own step.  So
     runs of one model at different steps see the same excitation."""
+    if not (isinstance(time_step, int | float) and math.isfinite(time_step) and time_step > 0):
+        raise SignalError(f"time step must be a positive number of seconds, got {time_step!r}")
     if abs(time_step - signal.time_step) < 1e-12:
         return signal
     k0 = int(round(signal.settle_time / signal.time_step))

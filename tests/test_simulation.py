@@ -104,6 +104,24 @@ def test_bad_signal_requests(kwargs, match):
         make_seat_signal(**{"kind": "random", "direction": "z", **kwargs})
 
 
+def test_a_signal_played_at_another_step_keeps_its_samples():
+    from ehm_drake.signals import at_time_step
+
+    sig = make_seat_signal("random", "xyz", 0.3, 6.0, 4, 0.001, 1.0, 0.5)
+    assert at_time_step(sig, 0.001) is sig
+    coarse = at_time_step(sig, 0.005)
+    assert coarse.time_step == 0.005 and coarse.settle_time == sig.settle_time
+    assert coarse.meta == sig.meta
+    # Every fifth sample after the settle time, fade-in included.
+    k0 = int(round(sig.settle_time / 0.001))
+    n0 = int(round(coarse.settle_time / 0.005))
+    played = coarse.acceleration[n0:]
+    assert np.allclose(played, sig.acceleration[k0::5][:len(played)], rtol=0, atol=1e-12)
+    for bad in (0.0, -0.005, float("nan"), "5 ms"):
+        with pytest.raises(SignalError, match="positive number of seconds"):
+            at_time_step(sig, bad)
+
+
 def test_body_feels_the_seat_motion_exactly(params):
     """A rigid body away from the seat falls freely in the inertial frame,
     whatever the seat does: its absolute motion is exactly the discrete free
