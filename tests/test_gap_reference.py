@@ -277,3 +277,20 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
         assert e["beyond_null"] == (e["heldout_gain"] > e["null_threshold"])
     assert "Reference group" in (none / "diagnosis" / "report.md").read_text()
     assert "reference group of 4" in (out / "blind.md").read_text()
+
+
+def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
+    """The cached null gains are keyed by the scoring code as well as the
+    group, candidates and anchor: a change to how candidates are scored
+    never reuses thresholds computed by the old code."""
+    from ehm_drake.gap import reference
+
+    labs, _ = _subjects(5, seed=1)
+    g = ReferenceGroup.from_labs(labs)
+    k0 = reference._null_key(g, ["arms", "reflex_delay"], "a")
+    assert k0 == reference._null_key(g, ["reflex_delay", "arms"], "a")
+    assert k0 != reference._null_key(g, ["arms"], "a")
+    assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "b")
+    assert k0 != reference._null_key(g.without(0), ["arms", "reflex_delay"], "a")
+    monkeypatch.setattr(reference, "_scoring_fingerprint", lambda: "other scoring code")
+    assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "a")

@@ -473,13 +473,31 @@ def _subject_job(name: str) -> dict:
     return {"name": name, **res[name]}
 
 
+def _scoring_fingerprint() -> str:
+    """Hash of the sources that score a candidate on a residual (the null
+    gains cached from other scoring code are never reused)."""
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in ("models.py", "reference.py", "localize.py"):
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def _null_key(group: ReferenceGroup, names, anchor_key: str) -> str:
+    """Cache key of the null gains: the group, the candidates, the anchor,
+    and the model and scoring code."""
+    from .diagnose import _code_fingerprint
+
+    return hashlib.sha256(json.dumps([CACHE_VERSION, anchor_key, group.fingerprint(),
+                                      sorted(names), _code_fingerprint(),
+                                      _scoring_fingerprint()]).encode()).hexdigest()[:20]
+
+
 def null_gains(group: ReferenceGroup, families, slope, base_names, names, workers=None,
                progress=None, use_cache: bool = True, anchor_key: str = "") -> dict:
     """{candidate: [held-out gain of each reference subject against the
     others]}: the gains of subjects without any effect.  Cached."""
-    key = hashlib.sha256(json.dumps([CACHE_VERSION, anchor_key, group.fingerprint(),
-                                     sorted(names)]).encode()).hexdigest()[:20]
-    path = cache_dir() / "reference_null" / f"{key}.json"
+    path = cache_dir() / "reference_null" / f"{_null_key(group, names, anchor_key)}.json"
     if use_cache and path.is_file():
         return json.loads(path.read_text())
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
