@@ -2,9 +2,12 @@
 time simulation at small amplitude (modal issue acceptance).
 
 The seat signal is a multisine (0.05 Hz grid, 0.1-12 Hz, seeded phases,
-0.05 m/s^2 RMS, 120 s): its 20 s period makes the H1 estimate over whole
+0.05 m/s^2 RMS, 60 s): its 20 s period makes the H1 estimate over whole
 periods (rectangular window, no overlap, no band filter) free of leakage
-bias, so the comparison measures the model, not the estimator.  (With
+bias, so the comparison measures the model, not the estimator.  The first
+period holds the onset and the transients; the two after it are averaged
+(in steady state every period is the same: the worst errors agree to four
+digits with 2, 3 or 5 averaged periods).  (With
 random excitation the same check is limited by H1's resolution bias at the
 sharp lateral peak, ~10% at 0.075 Hz resolution.)"""
 
@@ -27,6 +30,7 @@ DOMINANT = {"x": [("head", "x"), ("head", "pitch"), ("trunk", "x")],
             "y": [("head", "y"), ("head", "roll")],
             "z": [("pelvis", "z"), ("head", "z")]}
 PERIOD_S = 20.0
+AVERAGED = 2  # periods averaged after the first
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +43,7 @@ def linear_model(params):
 def test_linear_frf_matches_nonlinear_simulation(params, settled_default, linear_model,
                                                  direction):
     s = params.simulation
-    sig = make_seat_signal("multisine", direction, 0.05, 120.0, 21, s.time_step_s,
+    sig = make_seat_signal("multisine", direction, 0.05, 3 * PERIOD_S, 21, s.time_step_s,
                            s.settle_time_s, s.onset_time_s)
     run = vibrate(params, settled_default, sig)
     # Whole periods after the first (onset and transients).
@@ -47,8 +51,9 @@ def test_linear_frf_matches_nonlinear_simulation(params, settled_default, linear
     n = int(round(PERIOD_S * steady.sample_rate))
     steady = steady.after(steady.times[0])
     ts = steady.to_timeseries()
-    ts = type(ts)(ts.t[:5 * n], ts.seat_acc[:5 * n],
-                  {k: v[:5 * n] for k, v in ts.channels.items()}, ts.meta)
+    assert len(ts.t) >= AVERAGED * n  # whole periods only
+    ts = type(ts)(ts.t[:AVERAGED * n], ts.seat_acc[:AVERAGED * n],
+                  {k: v[:AVERAGED * n] for k, v in ts.channels.items()}, ts.meta)
     est = transmissibility(ts, band=None, nperseg=n, noverlap=0, window="boxcar", f_min=0.075)
     worst = 0.0
     for seg, dof in DOMINANT[direction]:
