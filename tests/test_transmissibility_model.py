@@ -44,7 +44,7 @@ def _run_rigid(direction: str) -> SimulationResult:
     params = _rigid_params()
     eq, smap = static_equilibrium(build_diagram(params, guard=False))
     x0 = smap.get(eq)
-    sig = make_seat_signal("random", direction, 0.5, 45.0, 2, settle_time=0.5, onset_time=0.5)
+    sig = make_seat_signal("random", direction, 0.5, 25.0, 2, settle_time=0.5, onset_time=0.5)
     model = build_diagram(params, signal=sig, guard=False, log_period=0.005)
     ctx = model.diagram.CreateDefaultContext()
     StateMap(model).set(ctx, x0)
