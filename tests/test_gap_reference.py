@@ -292,5 +292,5 @@ def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
     assert k0 != reference._null_key(g, ["arms"], "a")
     assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "b")
     assert k0 != reference._null_key(g.without(0), ["arms", "reflex_delay"], "a")
-    monkeypatch.setattr(reference, "_scoring_fingerprint", lambda: "other scoring code")
+    monkeypatch.setattr(reference, "scoring_fingerprint", lambda: "other scoring code")
     assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "a")

@@ -197,6 +197,14 @@ def _code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
+def scoring_fingerprint() -> str:
+    """Hash of the sources that score a candidate on a residual (cached
+    reference-group thresholds from other scoring code are never reused)."""
+    here = Path(__file__).resolve().parent
+    return hashlib.sha256(b"".join((here / n).read_bytes() for n in (
+        "models.py", "reference.py", "localize.py"))).hexdigest()[:16]
+
+
 def _family_key(params: ModelParams, measures: BodyMeasures, base_names, spec) -> str:
     blob = json.dumps([CACHE_VERSION, _code_fingerprint(), params.to_dict(),
                        [measures.mass_kg, measures.stature_m,

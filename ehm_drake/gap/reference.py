@@ -1,5 +1,4 @@
-"""Gap diagnosis against a reference group: a design in which the model-form
-gap cancels.
+"""Gap diagnosis against a reference group: the model-form gap cancels.
 
 A real subject differs from any model by more than the measurement error;
 on such data the model-based diagnosis (`diagnose.diagnose`) cannot tell an
@@ -62,14 +61,16 @@ from .diagnose import (
     Diagnosis,
     DiagnosisError,
     LabData,
+    _code_fingerprint,
     cache_dir,
     candidate_names,
     load_families,
     load_lab_data,
+    scoring_fingerprint,
     separation_slope,
 )
-from .localize import MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
-from .models import Candidate, Predictor, Statics, coordinate, fit_candidate
+from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
+from .models import Candidate, Predictor, Statics, coordinate, fit_candidate, residuals
 
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.
@@ -275,8 +276,6 @@ def fit_anchor(group: ReferenceGroup, params: ModelParams, measures: BodyMeasure
     iteration: {"log_scales", "history": [(cost before, after)], "params"}.
     Weighted by the variance of the group mean (scatter / K) plus the 3%
     model floor.  Cached by the group's data and the model."""
-    from .diagnose import _code_fingerprint
-
     free = resolve_free("default")
     base_names = [f.name for f in free]
     key = hashlib.sha256(json.dumps([CACHE_VERSION, _code_fingerprint(), group.fingerprint(),
@@ -303,7 +302,6 @@ def fit_anchor(group: ReferenceGroup, params: ModelParams, measures: BodyMeasure
                                  scale_lo=sb[:, 0], scale_hi=sb[:, 1])
         zero = np.zeros(len(free))
         pred.update_statistics(zero)
-        from .models import residuals
         before = float(np.sum(residuals(pred, zero, every)[:2 * len(rows)] ** 2))
         fit = fit_candidate(pred, every, zero)
         after = float(np.sum(residuals(pred, fit.theta, every)[:2 * len(rows)] ** 2))
@@ -473,24 +471,10 @@ def _subject_job(name: str) -> dict:
     return {"name": name, **res[name]}
 
 
-def _scoring_fingerprint() -> str:
-    """Hash of the sources that score a candidate on a residual (the null
-    gains cached from other scoring code are never reused)."""
-    here = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for name in ("models.py", "reference.py", "localize.py"):
-        h.update((here / name).read_bytes())
-    return h.hexdigest()[:16]
-
-
 def _null_key(group: ReferenceGroup, names, anchor_key: str) -> str:
-    """Cache key of the null gains: the group, the candidates, the anchor,
-    and the model and scoring code."""
-    from .diagnose import _code_fingerprint
-
-    return hashlib.sha256(json.dumps([CACHE_VERSION, anchor_key, group.fingerprint(),
-                                      sorted(names), _code_fingerprint(),
-                                      _scoring_fingerprint()]).encode()).hexdigest()[:20]
+    """Cache key of the null gains: group, candidates, anchor, model and scoring code."""
+    return hashlib.sha256(json.dumps([CACHE_VERSION, anchor_key, group.fingerprint(), sorted(
+        names), _code_fingerprint(), scoring_fingerprint()]).encode()).hexdigest()[:20]
 
 
 def null_gains(group: ReferenceGroup, families, slope, base_names, names, workers=None,
@@ -596,7 +580,6 @@ def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
     """Where the model (refit to the group) differs from the group mean:
     the cells beyond the group mean's uncertainty plus the model floor, each
     with its RMS log-gain difference."""
-    from .localize import BANDS
 
     rows = group.rows
     d = _wrap(log_model - group.mean_log)
