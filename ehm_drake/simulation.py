@@ -236,7 +236,7 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
     # Jacobian, and a fresh one that does not is kept (Newton) but its
     # Jacobian is not reused (it would step back: a cycle across a kink).
     # The seating-in re-solves then cost a few residuals instead of a
-    # Jacobian each (908 -> ~300 residuals for the default model).
+    # Jacobian each (908 -> 182 residuals for the default model).
     jac = [None]
 
     def solve(x):

@@ -580,7 +580,6 @@ def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
     """Where the model (refit to the group) differs from the group mean:
     the cells beyond the group mean's uncertainty plus the model floor, each
     with its RMS log-gain difference."""
-
     rows = group.rows
     d = _wrap(log_model - group.mean_log)
     chi = np.abs(d) ** 2 / (group.variance / group.size + 2 * MODEL_FLOOR**2)
