@@ -37,7 +37,7 @@ def test_static_equilibrium_reuses_its_jacobian(params, monkeypatch):
     """The seating-in re-solves reuse the Newton Jacobian while its steps
     halve the residual: the default model's equilibrium takes under 300
     discrete steps (a fresh finite-difference Jacobian per Newton step
-    took 908), and is the same fixed point."""
+    took 908), and it is a fixed point."""
     model = build_diagram(params, guard=False)
     calls = [0]
     step = StateMap.step
