@@ -184,25 +184,29 @@ def cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "ehm_drake"
 
 
+def _sources_fingerprint(files) -> str:
+    """Hash of the contents of `files`, in the order given."""
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def _code_fingerprint() -> str:
     """Hash of the sources the linear families depend on (a cached family
     from other model code is never reused)."""
     root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    files = sorted([*root.glob("model/*.py"), *root.glob("systems/*.py"), root / "diagram.py",
-                    root / "params.py", root / "gap" / "family.py", root / "gap" / "effects.py",
-                    root / "simulation.py", root / "analysis" / "linear.py"])
-    for f in files:
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
+    return _sources_fingerprint(sorted([
+        *root.glob("model/*.py"), *root.glob("systems/*.py"), root / "diagram.py",
+        root / "params.py", root / "gap" / "family.py", root / "gap" / "effects.py",
+        root / "simulation.py", root / "analysis" / "linear.py"]))
 
 
 def scoring_fingerprint() -> str:
     """Hash of the sources that score a candidate on a residual (cached
     reference-group thresholds from other scoring code are never reused)."""
     here = Path(__file__).resolve().parent
-    return hashlib.sha256(b"".join((here / n).read_bytes() for n in (
-        "models.py", "reference.py", "localize.py"))).hexdigest()[:16]
+    return _sources_fingerprint(here / n for n in ("models.py", "reference.py", "localize.py"))
 
 
 def _family_key(params: ModelParams, measures: BodyMeasures, base_names, spec) -> str:
