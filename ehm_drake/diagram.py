@@ -1,17 +1,20 @@
 """Assemble the seated-human Diagram.
 
-    excitation --a--> seat inertial load --+
-    plant --state--> passive joints -------+
-                 --> joint PID ------------+--> sum --> plant.applied_generalized_force
-                 --> shear restraints -----+
-                 --> head-in-space --------+
-                 --> extensions' forces ---+
+    excitation --a--> force laws: seat inertial load --+
+    plant --state-->              passive joints       |
+                                  joint PID            +--> plant.applied_generalized_force
+                                  shear restraints     |    (through a sum when
+                                  head-in-space      --+     extensions add forces)
+                 --> extensions' forces ---------------+
     plant --state--> body channels (+ seat displacement) --> "channels"
 
-That is the reference design.  On the implicit design one system,
-`ForceLaws` ("force_laws"), applies the five laws in one pass and feeds
-the plant directly (through the sum only when extensions add forces);
-`EhmDiagram.systems` holds its `LawView`s under the five names.
+On both designs one system, `ForceLaws` ("force_laws"), applies the five
+laws in one pass; `EhmDiagram.systems` holds its `LawView`s under the five
+names (``joint_pid``, ``head_in_space``, ...).  `separate_force_systems`
+builds the same laws as one LeafSystem each (`PassiveJoints`, `JointPid`,
+`ShearRestraints`, `HeadInSpace`, `SeatInertialLoad`): the readable form,
+which `ForceLaws` equals to rounding (tests/test_force_laws.py) at about
+half the cost per step.
 
 `build_diagram(params, ...)` returns an `EhmDiagram` holding the Diagram and
 handles to every subsystem.  Without a signal, the diagram exports the
@@ -199,29 +202,25 @@ def build_diagram(
 
     state = plant.get_state_output_port()
     parts = DiagramParts(builder, hp, params, h, state, accel_out, disp_out, sys)
-    if hp.design == "implicit":
-        # One system for the five laws (see `ForceLaws`); it reads the
-        # controllers' view of the body on its own input when that may
-        # differ from the plant state.
-        laws = builder.AddNamedSystem("force_laws", _force_laws(
-            hp, params, h, controller_input or _transforms_feedback(extensions)))
-        builder.Connect(accel_out, laws.GetInputPort("seat_acceleration"))
-        forces, controllers = [laws], ()
-        sys.update(laws.views)
-        sys["force_laws"] = laws
-        law_ports = {"joint_torques": laws.GetOutputPort("joint_torques"),
-                     "his_torque": laws.GetOutputPort("his_torque"),
-                     "restraint_seat_forces": laws.GetOutputPort("restraint_seat_forces"),
-                     "restraint_normal_displacement": laws.GetOutputPort("normal_displacement"),
-                     "restraint_deflection": laws.GetOutputPort("deflection")}
-    else:
-        forces, law_ports = _reference_force_systems(builder, hp, params, h, accel_out, sys)
-        controllers = (sys["joint_pid"], sys["head_in_space"])
+    # One system for the five laws (see `ForceLaws`); it reads the
+    # controllers' view of the body on its own input when that may differ
+    # from the plant state.
+    laws = builder.AddNamedSystem("force_laws", _force_laws(
+        hp, params, h, controller_input or _transforms_feedback(extensions)))
+    builder.Connect(accel_out, laws.GetInputPort("seat_acceleration"))
+    forces = [laws]
+    sys.update(laws.views)
+    sys["force_laws"] = laws
+    law_ports = {"joint_torques": laws.GetOutputPort("joint_torques"),
+                 "his_torque": laws.GetOutputPort("his_torque"),
+                 "restraint_seat_forces": laws.GetOutputPort("restraint_seat_forces"),
+                 "restraint_normal_displacement": laws.GetOutputPort("normal_displacement"),
+                 "restraint_deflection": laws.GetOutputPort("deflection")}
     # The extensions' force systems (their "state" input is connected below).
     for ext in extensions:
         forces += ext.add_force_systems(parts)
     applied = plant.get_applied_generalized_force_input_port()
-    if len(forces) > 1 or hp.design != "implicit":
+    if len(forces) > 1:
         adder = builder.AddNamedSystem("generalized_force_sum", Adder(len(forces), layout.nv))
         builder.Connect(adder.get_output_port(), applied)
         applied = None
@@ -236,7 +235,7 @@ def build_diagram(
         for ext in extensions:
             feedback = ext.transform_feedback(parts, feedback)
     for i, s in enumerate(forces):
-        builder.Connect(feedback if s in controllers else state, s.GetInputPort("state"))
+        builder.Connect(state, s.GetInputPort("state"))
         if s.HasInputPort("controller_state"):
             builder.Connect(feedback, s.GetInputPort("controller_state"))
         builder.Connect(s.GetOutputPort("generalized_force"),
@@ -293,12 +292,14 @@ def build_diagram(
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
 
 
-def _reference_force_systems(builder, hp: HumanPlant, params: ModelParams, h: float, accel_out,
-                             sys: dict):
-    """The reference design's force systems, one per law (their ``state``
-    inputs connected by the caller), recorded in `sys`; returns them and
-    the ports of the joint and head-in-space torques and the restraints'
-    seat forces, normal displacements and deflections."""
+def separate_force_systems(builder, hp: HumanPlant, params: ModelParams, h: float, accel_out,
+                           sys: dict):
+    """The five force laws as one LeafSystem each (their ``state`` inputs
+    connected by the caller), recorded in `sys`; returns them and the ports
+    of the joint and head-in-space torques and the restraints' seat forces,
+    normal displacements and deflections.  `build_diagram` uses `ForceLaws`
+    instead, which equals their sum to rounding at about half the Python
+    cost per step; this is the form it is checked against."""
     layout, plant = hp.layout, hp.plant
     # Joint torques: passive Cardan springs + PID.
     k = passive_stiffness_vector(params, layout)
@@ -339,8 +340,8 @@ def _reference_force_systems(builder, hp: HumanPlant, params: ModelParams, h: fl
 
 
 def _force_laws(hp: HumanPlant, params: ModelParams, h: float, feedback_input: bool):
-    """The implicit design's `ForceLaws`, with the same laws and parameters
-    as `_reference_force_systems` builds one by one."""
+    """`ForceLaws`, with the same laws and parameters as
+    `separate_force_systems` builds one by one."""
     layout = hp.layout
     k = passive_stiffness_vector(params, layout)
     gains = pid_vectors(params, layout)

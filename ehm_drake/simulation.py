@@ -54,8 +54,8 @@ class StateMap:
     """The diagram's discrete state groups (plant, PID, restraints) as one
     stacked vector, in the order of the diagram's own discrete values.
 
-    A group is named by its system; a system with several groups (the
-    implicit design's `ForceLaws`) names each by the part it belongs to
+    A group is named by its system; a system with several groups
+    (`ForceLaws`) names each by the part it belongs to
     (`discrete_state_view(group)`, e.g. ``joint_pid``)."""
 
     def __init__(self, model):

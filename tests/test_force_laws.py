@@ -1,4 +1,4 @@
-"""`ForceLaws`: the implicit design's five force laws in one system.  It must
+"""`ForceLaws`: the five force laws in one system.  It must
 be the five separate systems (passive joints, joint PID, head-in-space,
 shear restraints, seat inertial load) to rounding: the same generalized
 force, torques, seat forces and discrete updates at any state, for the
@@ -12,7 +12,7 @@ import pytest
 from pydrake.systems.framework import BasicVector, DiagramBuilder
 from pydrake.systems.primitives import PassThrough
 
-from ehm_drake.diagram import _force_laws, _reference_force_systems, build_diagram
+from ehm_drake.diagram import _force_laws, build_diagram, separate_force_systems
 from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import apply_variant, load_params, reference_design
 from ehm_drake.simulation import StateMap, static_equilibrium
@@ -50,7 +50,7 @@ class Rig:
         builder.ExportInput(feedback.get_input_port(), "controller_state")
         state = hp.plant.get_state_output_port()
         self.old = {}
-        forces, _ = _reference_force_systems(builder, hp, params, h, accel.get_output_port(),
+        forces, _ = separate_force_systems(builder, hp, params, h, accel.get_output_port(),
                                              self.old)
         for s in forces:
             controller = s in (self.old["joint_pid"], self.old["head_in_space"])

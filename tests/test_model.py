@@ -221,8 +221,9 @@ def test_a_new_extension_reaches_the_diagram_without_core_changes(params, monkey
         ctx = m.diagram.CreateDefaultContext()
         for port in ("seat_acceleration", "seat_displacement"):
             m.diagram.GetInputPort(port).FixValue(ctx, np.zeros(3))
-        adder = m.diagram.GetSubsystemByName("generalized_force_sum")
-        force = adder.get_output_port().Eval(adder.GetMyContextFromRoot(ctx))
+        # What the plant receives (through the sum when an extension adds
+        # a force system, straight from `ForceLaws` otherwise).
+        force = m.plant.get_applied_generalized_force_input_port().Eval(m.plant_context(ctx))
         r = m.systems["shear_restraints"]
         gated = restraint_block(r.GetMyContextFromRoot(ctx).get_numeric_parameter(
             r.parameter_index).CopyToVector(), "contact_gated")

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 from pydrake.systems.framework import LeafSystem_
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..signals import SeatSignal
-from . import SCALARS
+from . import define_system
 
 
-@TemplateSystem.define("SeatExcitation_", T_list=SCALARS)
+@define_system("SeatExcitation_", __name__)
 def SeatExcitation_(T):
     class Impl(LeafSystem_[T]):
         """Outputs ``seat_acceleration``, ``seat_velocity``,

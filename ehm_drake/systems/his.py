@@ -15,9 +15,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from . import SCALARS, PlantScratch
+from . import PlantScratch, define_system
 from .rotations import rotation_from_rpy, rpy_from_rotation
 
 
@@ -27,7 +26,7 @@ def head_in_space_torque(kp, kd, R_WH, R_ref_T, w_WH):
     return -(kp * rpy_from_rotation(R_WH @ R_ref_T) + kd * w_WH)
 
 
-@TemplateSystem.define("HeadInSpace_", T_list=SCALARS)
+@define_system("HeadInSpace_", __name__)
 def HeadInSpace_(T):
     class Impl(LeafSystem_[T]):
         """Input ``state`` (plant [q; v]); outputs ``generalized_force``

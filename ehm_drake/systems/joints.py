@@ -33,10 +33,9 @@ from __future__ import annotations
 import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..model.plant import JointLayout
-from . import SCALARS
+from . import define_system
 
 
 def rpy_rate_matrices(rpy):
@@ -123,7 +122,7 @@ def passive_torque(stiffness_and_neutral, q, v_rot, v_spine, ball: _BallIndex, i
     return cardan_to_generalized(ball, q, tau)
 
 
-@TemplateSystem.define("PassiveJoints_", T_list=SCALARS)
+@define_system("PassiveJoints_", __name__)
 def PassiveJoints_(T):
     class Impl(LeafSystem_[T]):
         """Cardan torsional springs on the rotational joints and the axial
@@ -195,7 +194,7 @@ PassiveJoints = PassiveJoints_[None]
 PID_PARAMETERS = ("kp", "ki", "kd", "integral_limit", "reference")
 
 
-@TemplateSystem.define("JointPid_", T_list=SCALARS)
+@define_system("JointPid_", __name__)
 def JointPid_(T):
     class Impl(LeafSystem_[T]):
         """Vectorized PID on every rotational joint DoF (Desai et al.).
@@ -309,7 +308,7 @@ def JointPid_(T):
 JointPid = JointPid_[None]
 
 
-@TemplateSystem.define("CoContraction_", T_list=SCALARS)
+@define_system("CoContraction_", __name__)
 def CoContraction_(T):
     class Impl(LeafSystem_[T]):
         """Muscle co-contraction rising with the vibration level (the

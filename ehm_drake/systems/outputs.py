@@ -23,9 +23,8 @@ from pydrake.systems.framework import (
     LeafSystem_,
     ValueProducer,
 )
-from pydrake.systems.scalar_conversion import TemplateSystem
 
-from . import SCALARS, PlantScratch
+from . import PlantScratch, define_system
 from .rotations import rotation_from_rpy, rpy_from_rotation, rpy_from_rotation_list
 from .seat import SEAT_PART_NAMES
 
@@ -42,7 +41,7 @@ PAPER_CHANNELS = {"x": [("pelvis", "x"), ("trunk", "x"), ("head", "x"), ("pelvis
                         ("head", "pitch")]}
 
 
-@TemplateSystem.define("BodyChannels_", T_list=SCALARS)
+@define_system("BodyChannels_", __name__)
 def BodyChannels_(T):
     class Impl(LeafSystem_[T]):
         """Inputs ``state`` (plant [q; v]) and ``seat_displacement``;

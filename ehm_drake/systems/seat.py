@@ -23,7 +23,6 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
-from pydrake.systems.scalar_conversion import TemplateSystem
 
 from ..model.restraints import (  # noqa: F401  (re-exported: the seat's parts and points)
     SEAT_PART_NAMES,
@@ -34,7 +33,7 @@ from ..model.restraints import (  # noqa: F401  (re-exported: the seat's parts a
 )
 from ..model.stepping import step_split
 from ..params import CONTACT_PAIRS, ModelParams
-from . import SCALARS, PlantScratch
+from . import PlantScratch, define_system
 
 #: Blocks of the packed parameter vector of ShearRestraints (n values each).
 RESTRAINT_PARAMETERS = ("stiffness", "damping", "force_limit", "contact_gated",
@@ -250,7 +249,7 @@ def slip_update(prm: dict, face, pos, pos_n, slip, fmax=None):
     return new
 
 
-@TemplateSystem.define("ShearRestraints_", T_list=SCALARS)
+@define_system("ShearRestraints_", __name__)
 def ShearRestraints_(T):
     class Impl(LeafSystem_[T]):
         """The seat interface beyond Drake's contact: shear point restraints
@@ -410,7 +409,7 @@ def ShearRestraints_(T):
 ShearRestraints = ShearRestraints_[None]
 
 
-@TemplateSystem.define("SeatInertialLoad_", T_list=SCALARS)
+@define_system("SeatInertialLoad_", __name__)
 def SeatInertialLoad_(T):
     class Impl(LeafSystem_[T]):
         """Inputs ``state`` and ``seat_acceleration`` (3, m/s^2, in S);
