@@ -32,8 +32,13 @@ def plot_case(direction: str, models: dict[str, FrfData], path: str | Path,
     """Figure of one loading case; `models` maps a label to its FrfData."""
     dofs = CASE_DOFS[direction]
     nrow, ncol = len(SEGMENT_ROWS), len(dofs)
-    fig = plt.figure(figsize=(3.4 * ncol, 2.6 * nrow + 0.6))
-    grid = fig.add_gridspec(2 * nrow, ncol, height_ratios=[4, 1.2] * nrow, hspace=0.45)
+    width, height = 3.4 * ncol, 2.6 * nrow + 0.6
+    fig = plt.figure(figsize=(width, height))
+    # Fixed margins (inches) for the labels and the title, instead of a
+    # tight bounding box, which draws the figure twice.
+    grid = fig.add_gridspec(2 * nrow, ncol, height_ratios=[4, 1.2] * nrow, hspace=0.45,
+                            wspace=0.38, left=0.75 / width, right=1 - 0.15 / width,
+                            top=1 - 0.7 / height, bottom=0.5 / height)
     for r, seg in enumerate(SEGMENT_ROWS):
         for c, dof in enumerate(dofs):
             ax = fig.add_subplot(grid[2 * r, c])
@@ -64,7 +69,7 @@ def plot_case(direction: str, models: dict[str, FrfData], path: str | Path,
     fig.suptitle(f"Seat-to-body transmissibility, {CASE_NAMES[direction]} ({direction}) "
                  "excitation", fontsize=11)
     path = Path(path)
-    fig.savefig(path, dpi=100, bbox_inches="tight")
+    fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
 
