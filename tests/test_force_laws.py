@@ -191,12 +191,16 @@ def test_every_branch_of_the_restraint_law_agrees():
         _compare(rig)
 
 
-def test_the_parts_keep_their_names_parameters_and_states():
-    """The implicit design's diagram has one force system, with its five
-    laws under their old names: their parameters in their old layouts, the
-    PID integral and the slip as state groups ``joint_pid`` and
-    ``shear_restraints``, and the plant fed without an Adder."""
-    model = build_diagram(implicit(), guard=False, seat_forces=False)
+@pytest.mark.parametrize("design", ["reference", "implicit"])
+def test_the_parts_keep_their_names_parameters_and_states(design):
+    """Each design's diagram has one force system, with its five laws under
+    their old names: their parameters in their old layouts, the PID
+    integral and the slip as state groups ``joint_pid`` and
+    ``shear_restraints`` (the order of the separate systems' groups, so a
+    settled state keeps its layout), and the plant fed without an Adder."""
+    params = implicit() if design == "implicit" else load_params()
+    assert params.simulation.design == design
+    model = build_diagram(params, guard=False, seat_forces=False)
     laws = model.systems["force_laws"]
     assert not model.diagram.HasSubsystemNamed("generalized_force_sum")
     assert {n: model.systems[n].system for n in LAWS} == {n: laws for n in LAWS}
