@@ -1,6 +1,5 @@
-"""Where a time step of `simulate` goes: the force systems (on the implicit
-design the one `ForceLaws` system, on the reference design each of the
-five and their sum), the whole discrete update (plant contact solve +
+"""Where a time step of `simulate` goes: the force laws (one `ForceLaws`
+system on both designs), the whole discrete update (plant contact solve +
 forces + the controllers' updates) and the logged outputs.
 
     python bench/bench_step_parts.py [time_step_s [design]]
@@ -27,9 +26,6 @@ import numpy as np
 from ehm_drake.diagram import build_diagram
 from ehm_drake.params import load_params
 from ehm_drake.simulation import StateMap, settle
-
-REFERENCE_FORCE_SYSTEMS = ("passive_joints", "joint_pid", "shear_restraints", "head_in_space",
-                           "seat_inertial_load")
 
 
 def main() -> None:
@@ -74,14 +70,8 @@ def main() -> None:
     design = params.simulation.design
     print(f"{design} design, time step {params.simulation.time_step_s * 1e3:g} ms; CPU us per "
           "evaluation at the settled state:")
-    if model.diagram.HasSubsystemNamed("force_laws"):  # the implicit design
-        forces = port("force_laws", "generalized_force")
-        print(f"  {'force_laws (5 laws)':26s} {cost(forces):7.1f}")
-    else:
-        for name in REFERENCE_FORCE_SYSTEMS:
-            print(f"  {name:26s} {cost(port(name, 'generalized_force')):7.1f}")
-        forces = port("generalized_force_sum", "sum")
-        print(f"  {'all forces (summed)':26s} {cost(forces):7.1f}")
+    forces = port("force_laws", "generalized_force")
+    print(f"  {'force_laws (5 laws)':26s} {cost(forces):7.1f}")
     update = lambda: model.diagram.EvalUniquePeriodicDiscreteUpdate(ctx)  # noqa: E731
     print(f"  {'whole discrete update':26s} {cost(update):7.1f}  (contact solve + forces + PID "
           "and restraint updates)")
