@@ -146,7 +146,7 @@ def _compare(rig: Rig):
 
 @pytest.mark.parametrize(("design", "variant"), [
     ("implicit", "default"), ("implicit", "no-integrator"), ("implicit", "high-stiffness"),
-    ("reference", "default")])
+    ("reference", "default"), ("reference", "no-integrator"), ("reference", "high-stiffness")])
 def test_the_merged_laws_are_the_separate_systems(design, variant):
     """At random states (and a controller view differing from the plant's,
     as under a feedback delay) the generalized force is the five systems'
