@@ -126,6 +126,35 @@ def test_profiled_scatter_gives_the_chi2_of_the_full_covariance():
     assert chi(along) < 0.2 * chi(across)
 
 
+def test_a_signature_flat_along_the_strength_path_is_still_fitted():
+    """The pads stay in contact up to the plausible offset, so a backrest
+    separation's signature is flat along the whole strength path and rises
+    only beyond it: the candidate's fit starts at the far end of its bounds
+    too, and finds a separation there (from the strength path and the
+    effect off alone the descent never moves and the gain is 0)."""
+    from ehm_drake.gap.models import Candidate
+    from ehm_drake.gap.reference import _gain, _Scorer
+
+    labs, _ = _subjects(6, seed=5)
+    g = ReferenceGroup.from_labs(labs)
+    f = g.rows.freq
+    shape = np.exp(-0.5 * ((f - 1.0) / 0.4) ** 2) * (0.8 - 0.3j)
+
+    def sig_of(c):  # offset in mm: nothing below 5, then a growing sway
+        return shape * max(float(c[0]) - 5.0, 0.0)
+
+    scorer = object.__new__(_Scorer)
+    scorer.tests = g.tests
+    scorer.test_masks = [g.rows.test_mask(t.direction, t.level) for t in g.tests]
+    scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
+                                        np.array([8.0]))
+    name = "backrest_separation"
+    assert max(c[0] for c in Candidate((name,)).start_grid()) < 5.0
+    res = scorer.score(sig_of([7.0]), g, [name])
+    assert res[name]["coords"][0] == pytest.approx(7.0, abs=0.05)
+    assert _gain(res[name], res["none"]) > 100
+
+
 def test_candidates_without_held_out_gain_have_no_rank_for_top3():
     from ehm_drake.gap.blind import score
 

@@ -13,9 +13,10 @@ with the group; the model gives only the *shape* of each candidate effect:
    of each subject from it, and their variance smoothed over 5 bins.
 2. The anchor: the model's base parameters (the default 20, within their
    physiological bounds) refit to the group mean, re-linearized at each
-   iteration (`fit_anchor`), so that the effect signatures are those of a
-   model that resonates where the group does.  What the anchor still misses
-   is the model-form gap; the report says where it lies (`model_form`).
+   iteration (`anchor.fit_anchor`), so that the effect signatures are those
+   of a model that resonates where the group does.  What the anchor still
+   misses is the model-form gap; the report says where it lies
+   (`model_form`).
 3. The subject's residual r = log H_subject - group mean, with the
    covariance of the group's smoothed variance times (1 + 1/K) plus the K
    deviations as a low-rank part (subjects differ from the mean by whole
@@ -51,11 +52,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..identification.parameters import apply_scales, resolve_free, scale_bounds
+from ..identification.parameters import resolve_free
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..parallel import run_jobs, worker_count
 from ..params import ModelParams, load_params
 from ..progress import Progress
+from .anchor import ANCHOR_ITERATIONS, fit_anchor, write_cache_json
 from .diagnose import (
     AMBIGUITY_MARGIN,
     Diagnosis,
@@ -70,7 +72,7 @@ from .diagnose import (
     separation_slope,
 )
 from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
-from .models import Candidate, Predictor, Statics, coordinate, fit_candidate, residuals
+from .models import Candidate, Predictor, Statics, coordinate
 
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.
@@ -78,9 +80,6 @@ MIN_SUBJECTS = 4
 #: Bins of the running mean of the group's variance per channel (a variance
 #: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).
 VARIANCE_SMOOTHING_BINS = 5
-#: Re-linearized iterations of the anchor fit (the cost changed by < 1% in
-#: the last of 4 on the lumped reality's group of 8: 288k, 250k, 239k, 237k).
-ANCHOR_ITERATIONS = 3
 #: A candidate is named when its held-out gain exceeds this factor times the
 #: largest gain it reached on the group's own subjects (leave one out): with
 #: K subjects the largest of K null gains is about the (1 - 1/K) quantile of
@@ -240,83 +239,6 @@ def load_reference(paths, channels: str = "plane") -> ReferenceGroup:
 
 
 # ---------------------------------------------------------------------------
-# The anchor: the model refit to the group mean
-# ---------------------------------------------------------------------------
-
-
-def _write_json(path: Path, obj) -> None:
-    """Cache `obj` at `path` (a cache that cannot be written is skipped)."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(obj))
-    except OSError:
-        pass
-
-
-class _BoundedPredictor(Predictor):
-    """A base-only predictor whose log-scales stay within the parameters'
-    physiological bounds around the current linearization point."""
-
-    def __init__(self, *args, scale_lo, scale_hi, **kw):
-        super().__init__(*args, **kw)
-        self._lo, self._hi = np.log(scale_lo) + 1e-9, np.log(scale_hi) - 1e-9
-
-    def bounds(self):
-        lo, hi = super().bounds()
-        nb = self.n_base
-        lo[:nb] = np.maximum(lo[:nb], self._lo)
-        hi[:nb] = np.minimum(hi[:nb], self._hi)
-        return lo, np.maximum(hi, lo + 1e-9)
-
-
-def fit_anchor(group: ReferenceGroup, params: ModelParams, measures: BodyMeasures,
-               iterations: int = ANCHOR_ITERATIONS, workers=None, progress=None,
-               use_cache: bool = True) -> dict:
-    """The base parameters refit to the group mean, re-linearized at every
-    iteration: {"log_scales", "history": [(cost before, after)], "params"}.
-    Weighted by the variance of the group mean (scatter / K) plus the 3%
-    model floor.  Cached by the group's data and the model."""
-    free = resolve_free("default")
-    base_names = [f.name for f in free]
-    key = hashlib.sha256(json.dumps([CACHE_VERSION, _code_fingerprint(), group.fingerprint(),
-                                     params.to_dict(), measures.mass_kg, measures.stature_m,
-                                     iterations], sort_keys=True, default=float).encode()
-                         ).hexdigest()[:20]
-    path = cache_dir() / "anchors" / f"{key}.json"
-    if use_cache and path.is_file():
-        out = json.loads(path.read_text())
-        out["params"] = apply_scales(params, free, np.exp(out["log_scales"]))
-        return out
-    rows = dataclasses.replace(group.rows, rel_var=group.variance / group.size / 2
-                               + MODEL_FLOOR**2)
-    total = np.zeros(len(free))
-    history = []
-    every = np.ones(len(rows), bool)
-    for k in range(iterations):
-        pk = apply_scales(params, free, np.exp(total))
-        fams = load_families(pk, measures, [], base_names, workers, None, use_cache)
-        sb = np.array([scale_bounds(pk, f) for f in free])
-        pred = _BoundedPredictor(fams["base"], Candidate(()), rows, group.tests, base_names,
-                                 Statics(fams["base"].family.info,
-                                         separation_slope(pk, measures)),
-                                 scale_lo=sb[:, 0], scale_hi=sb[:, 1])
-        zero = np.zeros(len(free))
-        pred.update_statistics(zero)
-        before = float(np.sum(residuals(pred, zero, every)[:2 * len(rows)] ** 2))
-        fit = fit_candidate(pred, every, zero)
-        after = float(np.sum(residuals(pred, fit.theta, every)[:2 * len(rows)] ** 2))
-        history.append([before, after])
-        total = total + fit.theta
-        if progress:
-            progress(k + 1, iterations, before, after)
-    out = {"log_scales": total.tolist(), "history": history, "base_names": base_names}
-    if use_cache:
-        _write_json(path, out)
-    out["params"] = apply_scales(params, free, np.exp(total))
-    return out
-
-
-# ---------------------------------------------------------------------------
 # Scoring a subject against the group
 # ---------------------------------------------------------------------------
 
@@ -397,10 +319,18 @@ class _Scorer:
             def start_cost(c, refresh=refresh, res=res):
                 refresh(c)
                 return float(np.sum(res(c, every) ** 2))
-            # The strength path, and the effect off (where a null subject sits).
+            # The strength path, the effect off (where a null subject sits)
+            # and, for effects without a grid, the far end of the bounds: a
+            # signature can be flat along the whole strength path (pads that
+            # stay in contact up to the plausible offset) and start only
+            # beyond it, where no descent from the path would go.
             off = np.array([coordinate(p, p.off) if p.off > 0 or not p.log else lo[i]
                             for i, (_, p) in enumerate(cand.params)])
-            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), off]]
+            extra = [off]
+            if cand.grid_effect is None and len(off):
+                extra.append(np.array([hi[i] if coordinate(p, p.full) > off[i] else lo[i]
+                                       for i, (_, p) in enumerate(cand.params)]))
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), *extra]]
             x = min(starts, key=start_cost)
             for nfev in (DESCENT_EVALUATIONS, DESCENT_EVALUATIONS // 2):
                 refresh(x)
@@ -494,7 +424,7 @@ def null_gains(group: ReferenceGroup, families, slope, base_names, names, worker
         for n, g in r["gains"].items():
             out[n][r["subject"]] = g
     if use_cache:
-        _write_json(path, out)
+        write_cache_json(path, out)
     return out
 
 

@@ -1,0 +1,92 @@
+"""Re-diagnose the trials of a finished (or partial) blind run with the
+current code, in this process, and score them as `blind` does.
+
+A blind run (``ehm-drake blind ... --out RUN``) keeps each trial's data, its
+key and its detectability; this script diagnoses the stored data again
+(against the run's reference group when it has one) without touching the run
+folder, so a change to the diagnosis can be measured on the same trials:
+
+    python bench/rescore_blind.py RUN [--trials 0-9,12] [--out rescored.json]
+
+It prints one line per trial and the summary (top-1, top-3, false alarms)
+judged against the run's bar; `--out` writes the per-trial reports' scores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+
+def _trial_set(text: str | None):
+    if not text:
+        return None
+    out = set()
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out.update(range(int(a), int(b or a) + 1))
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", type=Path, help="the blind run's output folder")
+    p.add_argument("--trials", default=None, help="trial numbers, e.g. 0-9,12 (default all)")
+    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--out", type=Path, default=None, help="write the scores here (JSON)")
+    args = p.parse_args(argv)
+
+    from ehm_drake.gap.blind import score, summarize
+    from ehm_drake.gap.diagnose import diagnose, load_lab_data
+    from ehm_drake.gap.reference import diagnose_with_reference, load_reference
+    from ehm_drake.realities import MODEL_REALITY
+
+    settings = json.loads((args.run / "blind_settings.json").read_text())
+    reality = settings.get("reality", MODEL_REALITY)
+    candidates = settings.get("candidates")
+    group = (load_reference([args.run / "reference"]) if settings.get("references") else None)
+    wanted = _trial_set(args.trials)
+    results = []
+    for rfile in sorted(args.run.glob("trial_*/result.json")):
+        old = json.loads(rfile.read_text())
+        if wanted is not None and old["trial"] not in wanted:
+            continue
+        if "skipped" in old:
+            results.append(old)
+            continue
+        data = load_lab_data(rfile.parent / "data")
+        t0 = time.perf_counter()
+        if group is not None:
+            diag = diagnose_with_reference(data, group, effects=candidates,
+                                           workers=args.workers, progress=False)
+        else:
+            diag = diagnose(data, effects=candidates, workers=args.workers, progress=False)
+        rep = diag.report
+        sc = score(old["hidden"], rep, old["detectability"]["detectable"],
+                   reality != MODEL_REALITY)
+        new = {k: v for k, v in old.items() if k not in ("score",)}
+        new["score"] = sc
+        new["ranking"] = [{k: e.get(k) for k in ("effect", "heldout_gain", "null_threshold",
+                                                 "beyond_null", "gap_reduction_heldout",
+                                                 "params")} for e in rep["ranking"]]
+        results.append(new)
+        was = old.get("score", {}).get("predicted_label", "-")
+        top = ", ".join(f"{e['effect']} {e.get('heldout_gain', 0):.0f}/"
+                        f"{e.get('null_threshold', 0):.0f}" for e in rep["ranking"][:3])
+        print(f"trial {old['trial']:3d} {sc['truth_label']:40s} -> {sc['predicted_label']:24s}"
+              f" (was {was}; det {'y' if sc['detectable'] else 'n'}; "
+              f"{time.perf_counter() - t0:.0f} s) {top}", flush=True)
+    summary = summarize(results, reality)
+    print(json.dumps({k: summary[k] for k in ("trials", "detectable_trials", "no_effect_trials",
+                                              "top1", "top3", "false_alarm", "passed")},
+                     indent=1))
+    if args.out:
+        args.out.write_text(json.dumps({"summary": summary, "trials": results}, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
