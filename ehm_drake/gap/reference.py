@@ -91,6 +91,9 @@ MIN_GAIN = 16.3
 #: Evaluations of a candidate's descent on all tests (a second descent from
 #: refreshed response statistics and each held-out refit take half).
 DESCENT_EVALUATIONS = 16
+#: A candidate's fit is flat along its strength path when the costs of the
+#: starts differ by less than this fraction.
+FLAT_PATH = 1e-6
 CACHE_VERSION = "2"
 
 
@@ -319,19 +322,24 @@ class _Scorer:
             def start_cost(c, refresh=refresh, res=res):
                 refresh(c)
                 return float(np.sum(res(c, every) ** 2))
-            # The strength path, the effect off (where a null subject sits)
-            # and, for effects without a grid, the far end of the bounds: a
-            # signature can be flat along the whole strength path (pads that
-            # stay in contact up to the plausible offset) and start only
-            # beyond it, where no descent from the path would go.
+            # The strength path and the effect off (where a null subject
+            # sits).  Where the fit is flat along all of them (a backrest
+            # separation whose pads stay in contact up to the plausible
+            # offset), the far end of the bounds too: the signature may start
+            # only beyond the path, where no descent from it would go.  (Only
+            # then: a start beyond the plausible range raises the null gains
+            # of candidates whose path is not flat, and their thresholds.)
             off = np.array([coordinate(p, p.off) if p.off > 0 or not p.log else lo[i]
                             for i, (_, p) in enumerate(cand.params)])
-            extra = [off]
-            if cand.grid_effect is None and len(off):
-                extra.append(np.array([hi[i] if coordinate(p, p.full) > off[i] else lo[i]
-                                       for i, (_, p) in enumerate(cand.params)]))
-            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), *extra]]
-            x = min(starts, key=start_cost)
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), off]]
+            costs = [start_cost(c) for c in starts]
+            x = starts[int(np.argmin(costs))]
+            if cand.grid_effect is None and len(off) and \
+                    max(costs) - min(costs) <= FLAT_PATH * min(costs):
+                far = np.array([hi[i] if coordinate(p, p.full) > off[i] else lo[i]
+                                for i, (_, p) in enumerate(cand.params)])
+                if start_cost(far) < min(costs):
+                    x = far
             for nfev in (DESCENT_EVALUATIONS, DESCENT_EVALUATIONS // 2):
                 refresh(x)
                 x = least_squares(lambda c, res=res: res(c, every), x, bounds=(lo, hi),
