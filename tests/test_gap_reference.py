@@ -323,3 +323,45 @@ def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
     assert k0 != reference._null_key(g.without(0), ["arms", "reflex_delay"], "a")
     monkeypatch.setattr(reference, "scoring_fingerprint", lambda: "other scoring code")
     assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "a")
+
+
+def test_null_threshold_is_an_exact_prediction_bound_for_normal_gains():
+    """For normal null gains the threshold from K of them is exceeded by one
+    more subject's gain with probability alpha / n (the Student-t prediction
+    bound), whatever the gains' location and spread: checked by drawing
+    20000 groups of K = 8 and one more subject each (seeded)."""
+    from ehm_drake.gap.reference import MIN_GAIN, null_threshold
+
+    rng = np.random.default_rng(3)
+    for loc, scale in ((500.0, 200.0), (-400.0, 300.0)):
+        g = rng.normal(loc, scale, (20000, 9))
+        thr = np.array([null_threshold(row[:8], 2, alpha=0.2) for row in g])
+        rate = np.mean(g[:, 8] > thr)
+        # 0.1 expected where the bound is above the floor; sd of the rate 0.002.
+        floor_share = np.mean(thr == MIN_GAIN)
+        if loc > 0:
+            assert floor_share < 0.01 and abs(rate - 0.1) < 0.008
+        else:
+            # Mostly floored: a next gain above MIN_GAIN is rarer than alpha / n.
+            assert rate < 0.1
+
+
+def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
+    """A candidate that ends at a bound on every reference subject (all gains
+    negative, spread several hundred) gets a threshold well above its largest
+    null gain; identical null gains give MIN_GAIN; more candidates, a higher
+    bar; bad nulls are refused."""
+    from ehm_drake.gap.reference import MIN_GAIN, null_threshold
+
+    arms = [-439, -509, -943, -880, -115, -737, -189, -119]
+    thr = null_threshold(arms, 8, alpha=0.1)
+    assert thr > 300
+    assert null_threshold([0.0] * 8, 8) == MIN_GAIN
+    spread = [0, 30, 16, 0, 220, 0, 0, 0]
+    assert null_threshold(spread, 8) > max(220, null_threshold(spread, 1))
+    # Subjects whose null failed (None) are left out, not counted as zero.
+    assert null_threshold([*spread, None], 8) == null_threshold(spread, 8)
+    with pytest.raises(DiagnosisError, match="2 finite"):
+        null_threshold([1.0, float("nan"), 3.0], 8)
+    with pytest.raises(DiagnosisError, match="2 finite"):
+        null_threshold([5.0], 8)

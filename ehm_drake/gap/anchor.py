@@ -23,8 +23,10 @@ from .diagnose import _code_fingerprint, cache_dir, load_families, separation_sl
 from .localize import MODEL_FLOOR
 from .models import Candidate, Predictor, Statics, fit_candidate, residuals
 
-#: Re-linearized iterations of the anchor fit (the cost changed by < 1% in
-#: the last of 4 on the lumped reality's group of 8: 288k, 250k, 239k, 237k).
+#: Re-linearized iterations of the anchor fit.  The cost changed by < 1% in
+#: the last of 4 on one `lumped` group of 8 (288k, 250k, 239k, 237k); on the
+#: `lumped` seed-2026 blind run's group the 3 end at 501k, 444k and 427k
+#: (from 684k; the last 4%, several scales at their bounds).
 ANCHOR_ITERATIONS = 3
 #: Version of the cached anchors' content (its key before the move from
 #: `reference`, so that anchors already cached stay valid).

@@ -29,7 +29,9 @@ with the group; the model gives only the *shape* of each candidate effect:
 5. Calibration from the group itself: each reference subject against the
    other K - 1 (leave one out) gives every candidate's held-out gain on
    subjects without any effect.  A candidate is named when its gain
-   exceeds `NULL_FACTOR` times the largest of these (and `MIN_GAIN`).
+   exceeds the upper prediction bound of these K gains for one more subject
+   (Student t, family-wise `FAMILY_ALPHA` over the candidates;
+   `null_threshold`), and `MIN_GAIN`.
 6. Verdict: `explained` (the largest held-out gain among the candidates
    beyond their null), `ambiguous` (another within `AMBIGUITY_MARGIN` of
    its held-out share), `unexplained` (the subject differs from the group
@@ -51,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
+from scipy.stats import t as student_t
 
 from ..identification.parameters import resolve_free
 from ..model.anthropometry import REFERENCE, BodyMeasures
@@ -80,11 +83,10 @@ MIN_SUBJECTS = 4
 #: Bins of the running mean of the group's variance per channel (a variance
 #: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).
 VARIANCE_SMOOTHING_BINS = 5
-#: A candidate is named when its held-out gain exceeds this factor times the
-#: largest gain it reached on the group's own subjects (leave one out): with
-#: K subjects the largest of K null gains is about the (1 - 1/K) quantile of
-#: the null; the factor covers the tail beyond it.
-NULL_FACTOR = 2.0
+#: The chance that a subject without any effect has one named (family-wise,
+#: over the candidates scored): the false-alarm bar of the validation (10%),
+#: Bonferroni-split between the candidates (`null_threshold`).
+FAMILY_ALPHA = 0.10
 #: ... and at least this held-out chi^2 gain (the 0.1% point of chi^2 with 3
 #: degrees of freedom: a candidate of up to 3 parameters at p < 0.001).
 MIN_GAIN = 16.3
@@ -370,6 +372,27 @@ def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
     return np.linalg.solve(At.T @ At + np.eye(At.shape[1]), At.T @ y)
 
 
+def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA) -> float:
+    """The held-out gain a candidate must exceed to be named: the one-sided
+    upper prediction bound, at level alpha / n_candidates, of one more
+    subject's gain from the K gains of the group's own subjects (`null`,
+    leave one out), mean + t_{K-1} s sqrt(1 + 1/K) -- exact for normal
+    gains -- and at least `MIN_GAIN`.  The spread counts, not only the
+    largest: a candidate whose fit ends at a bound on every subject (gains
+    -900 to -100) can still reach +150 on the next one, which twice the
+    largest (-100) would not cover."""
+    g = np.asarray([x for x in null if x is not None], float)
+    if len(g) < 2 or not np.all(np.isfinite(g)):
+        raise DiagnosisError(f"a candidate's null needs at least 2 finite gains, got {list(null)}")
+    if n_candidates < 1 or not 0 < alpha < 1:
+        raise ValueError(f"n_candidates >= 1 and 0 < alpha < 1 needed, got {n_candidates}, "
+                         f"{alpha}")
+    k = len(g)
+    bound = g.mean() + student_t.ppf(1 - alpha / n_candidates, k - 1) * g.std(ddof=1) * \
+        math.sqrt(1 + 1 / k)
+    return float(max(MIN_GAIN, bound))
+
+
 def _gain(res: dict, base: dict) -> float:
     return float(np.nansum(base["chi_heldout"]) - np.nansum(res["chi_heldout"]))
 
@@ -544,7 +567,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         cand = Candidate(tuple(n.split("+")))
         gain = _gain(r, base)
         null = [g for g in nulls.get(n, []) if g is not None]
-        threshold = max(MIN_GAIN, NULL_FACTOR * max(null, default=0.0))
+        threshold = null_threshold(null, len(names))
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
@@ -627,7 +650,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                  "notes": lab.notes},
         "method": {"design": "reference group", "folds": "test",
                    "heldout_sets": [f"{t.direction}@{t.level:g}" for t in group.tests],
-                   "null_factor": NULL_FACTOR, "min_gain": MIN_GAIN,
+                   "null_alpha": FAMILY_ALPHA, "min_gain": MIN_GAIN,
                    "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
                    "model_floor": MODEL_FLOOR,
                    "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "

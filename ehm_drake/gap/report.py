@@ -160,10 +160,11 @@ def markdown(rep: dict, figures: list[str]) -> str:
               f"Held-out sets ({m.get('folds')}): {', '.join(m.get('heldout_sets', []))}. "
               f"Significance: {m.get('significance')}; model floor "
               f"{m.get('model_floor')}. " + (
-                  f"Explained when a candidate's held-out chi^2 gain exceeds "
-                  f"{m.get('null_factor')} times the largest it reaches on the reference "
-                  f"group's own subjects (leave one out) and {m.get('min_gain')}; the largest "
-                  f"such gain is named; ambiguous when another named one comes within "
+                  f"Explained when a candidate's held-out chi^2 gain exceeds the upper "
+                  f"prediction bound of the gains it reaches on the reference group's own "
+                  f"subjects (leave one out; Student t, family-wise alpha "
+                  f"{m.get('null_alpha')} over the candidates) and {m.get('min_gain')}; the "
+                  f"largest such gain is named; ambiguous when another named one comes within "
                   f"{_pct(m.get('ambiguity_margin'))} of its held-out share."
                   if m.get("design") == "reference group" else
                   f"Explained when the best candidate lowers the held-out chi^2 by more than "
