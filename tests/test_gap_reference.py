@@ -363,5 +363,5 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
     assert null_threshold([*spread, None], 8) == null_threshold(spread, 8)
     with pytest.raises(DiagnosisError, match="2 finite"):
         null_threshold([1.0, float("nan"), 3.0], 8)
-    with pytest.raises(DiagnosisError, match="2 finite"):
-        null_threshold([5.0], 8)
+    with pytest.raises(DiagnosisError, match="arms: .* 2 finite"):
+        null_threshold([5.0], 8, name="arms")

@@ -372,7 +372,8 @@ def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
     return np.linalg.solve(At.T @ At + np.eye(At.shape[1]), At.T @ y)
 
 
-def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA) -> float:
+def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
+                   name: str = "a candidate") -> float:
     """The held-out gain a candidate must exceed to be named: the one-sided
     upper prediction bound, at level alpha / n_candidates, of one more
     subject's gain from the K gains of the group's own subjects (`null`,
@@ -380,10 +381,11 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA) -> floa
     gains -- and at least `MIN_GAIN`.  The spread counts, not only the
     largest: a candidate whose fit ends at a bound on every subject (gains
     -900 to -100) can still reach +150 on the next one, which twice the
-    largest (-100) would not cover."""
+    largest (-100) would not cover.  `name`: the candidate, for errors."""
     g = np.asarray([x for x in null if x is not None], float)
     if len(g) < 2 or not np.all(np.isfinite(g)):
-        raise DiagnosisError(f"a candidate's null needs at least 2 finite gains, got {list(null)}")
+        raise DiagnosisError(f"{name}: the reference group's null needs at least 2 finite "
+                             f"gains, got {list(null)}")
     if n_candidates < 1 or not 0 < alpha < 1:
         raise ValueError(f"n_candidates >= 1 and 0 < alpha < 1 needed, got {n_candidates}, "
                          f"{alpha}")
@@ -567,7 +569,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         cand = Candidate(tuple(n.split("+")))
         gain = _gain(r, base)
         null = [g for g in nulls.get(n, []) if g is not None]
-        threshold = null_threshold(null, len(names))
+        threshold = null_threshold(null, len(names), name=n)
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
