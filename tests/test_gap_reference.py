@@ -155,6 +155,46 @@ def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     assert _gain(res[name], res["none"]) > 100
 
 
+def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
+    """A foam-like signature: nothing below the equivalent linearization's
+    tolerance (flat at "off"), the right shape up to a small strength, and a
+    wrong, growing one from there on, so that every start on the strength
+    path costs more than "off".  The data carry the effect at 3% of the
+    model's full strength: only the weak starts below the path find it."""
+    from ehm_drake.gap.effects import EFFECTS
+    from ehm_drake.gap.models import STRENGTH_PATH, Candidate
+    from ehm_drake.gap.reference import _gain, _Scorer
+
+    labs, _ = _subjects(6, seed=7)
+    g = ReferenceGroup.from_labs(labs)
+    f = g.rows.freq
+    right = np.exp(-0.5 * ((f - 2.0) / 0.8) ** 2) * (1.2 + 0.4j)
+    wrong = np.exp(-0.5 * ((f - 7.0) / 1.5) ** 2) * (-0.5 + 0.4j)
+    name = "seat_foam_stiffening"
+    full = EFFECTS[name].params[0].full
+    c_true = 0.03 * full
+
+    def sig_of(c):
+        c = float(c[0])
+        if c < 2e-3 * full:  # below the tolerance: no change at all
+            return 0.0 * right
+        return right * min(c / c_true, 1.0) + wrong * max(c - c_true, 0.0) / c_true
+
+    scorer = object.__new__(_Scorer)
+    scorer.tests = g.tests
+    scorer.test_masks = [g.rows.test_mask(t.direction, t.level) for t in g.tests]
+    scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
+                                        np.array([20.0]))
+    r = sig_of([c_true])
+    # Every start on the model's strength path is worse than the effect off.
+    none_cost = np.sum(np.abs(r) ** 2)
+    assert all(np.sum(np.abs(r - sig_of(c)) ** 2) > none_cost
+               for c in Candidate((name,)).start_grid(STRENGTH_PATH))
+    res = scorer.score(r, g, [name])
+    assert res[name]["coords"][0] == pytest.approx(c_true, rel=0.05)
+    assert _gain(res[name], res["none"]) > 100
+
+
 def test_candidates_without_held_out_gain_have_no_rank_for_top3():
     from ehm_drake.gap.blind import score
 

@@ -76,6 +76,10 @@ GRID_REFERENCE = {"visceral_mass": {"mass_kg": 3.0},
                   "arms": {"shoulder_stiffness": 150.0, "hand_stiffness": 1.5e3}}
 
 
+#: Where a candidate's fit starts: fractions of its plausible strength.
+STRENGTH_PATH = (0.2, 0.45, 0.7, 1.0)
+
+
 def coordinate(p: EffectParam, value: float) -> float:
     return math.log(value) if p.log else float(value)
 
@@ -234,9 +238,9 @@ class Candidate:
             out[e][p.name] = value_of(p, c)
         return out
 
-    def start_grid(self) -> list[np.ndarray]:
-        """Starting coordinates to scan: the effect's strength path."""
-        strengths = (0.2, 0.45, 0.7, 1.0)
+    def start_grid(self, strengths=STRENGTH_PATH) -> list[np.ndarray]:
+        """Starting coordinates to scan: the effect's strength path (the
+        fractions `strengths` of its plausible range)."""
         if not self.effects:
             return [np.zeros(0)]
         per_effect = []

@@ -75,7 +75,7 @@ from .diagnose import (
     separation_slope,
 )
 from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
-from .models import Candidate, Predictor, Statics, coordinate
+from .models import STRENGTH_PATH, Candidate, Predictor, Statics, coordinate
 
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.
@@ -93,6 +93,15 @@ MIN_GAIN = 16.3
 #: Evaluations of a candidate's descent on all tests (a second descent from
 #: refreshed response statistics and each held-out refit take half).
 DESCENT_EVALUATIONS = 16
+#: Where each candidate's fit starts: its strength path (fractions of the
+#: model's plausible range, `models.STRENGTH_PATH`) and, below it, a decade
+#: of weak strengths.  A body that is not the model can carry an effect at a
+#: small fraction of the model's scale of it (the lumped reality's foam
+#: hardening fits at 3% of the model's gamma range: its pan and pad
+#: compressions are smaller), and a level-dependent effect's signature is
+#: flat at "off" (its equivalent stiffness is below `EQUIVALENT_TOL` for the
+#: descent's first difference), so no descent from "off" reaches it.
+START_STRENGTHS = (0.01, 0.03, 0.1, *STRENGTH_PATH)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
 FLAT_PATH = 1e-6
@@ -333,7 +342,7 @@ class _Scorer:
             # of candidates whose path is not flat, and their thresholds.)
             off = np.array([coordinate(p, p.off) if p.off > 0 or not p.log else lo[i]
                             for i, (_, p) in enumerate(cand.params)])
-            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(), off]]
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(START_STRENGTHS), off]]
             costs = [start_cost(c) for c in starts]
             x = starts[int(np.argmin(costs))]
             if cand.grid_effect is None and len(off) and \
