@@ -97,10 +97,11 @@ DESCENT_EVALUATIONS = 16
 #: model's plausible range, `models.STRENGTH_PATH`) and, below it, a decade
 #: of weak strengths.  A body that is not the model can carry an effect at a
 #: small fraction of the model's scale of it (the lumped reality's foam
-#: hardening fits at 3% of the model's gamma range: its pan and pad
-#: compressions are smaller), and a level-dependent effect's signature is
-#: flat at "off" (its equivalent stiffness is below `EQUIVALENT_TOL` for the
-#: descent's first difference), so no descent from "off" reaches it.
+#: hardening fits best at about 3% of the model's gamma path, and every start
+#: on the path costs more than "off"), and an equivalent-linearized effect's
+#: signature is flat at "off" (its equivalent stiffness is below
+#: `EQUIVALENT_TOL` for the descent's first difference), so no descent from
+#: "off" reaches it.
 START_STRENGTHS = (0.01, 0.03, 0.1, *STRENGTH_PATH)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
