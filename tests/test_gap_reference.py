@@ -126,6 +126,19 @@ def test_profiled_scatter_gives_the_chi2_of_the_full_covariance():
     assert chi(along) < 0.2 * chi(across)
 
 
+def _stub_scorer(group, sig_of, upper):
+    """A `_Scorer` on `group` whose every candidate has the one-coordinate
+    signature `sig_of` on [0, upper] (no response statistics to refresh)."""
+    from ehm_drake.gap.reference import _Scorer
+
+    scorer = object.__new__(_Scorer)
+    scorer.tests = group.tests
+    scorer.test_masks = [group.rows.test_mask(t.direction, t.level) for t in group.tests]
+    scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
+                                        np.array([upper]))
+    return scorer
+
+
 def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     """The pads stay in contact up to the plausible offset, so a backrest
     separation's signature is flat along the whole strength path and rises
@@ -133,7 +146,7 @@ def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     too, and finds a separation there (from the strength path and the
     effect off alone the descent never moves and the gain is 0)."""
     from ehm_drake.gap.models import Candidate
-    from ehm_drake.gap.reference import _gain, _Scorer
+    from ehm_drake.gap.reference import _gain
 
     labs, _ = _subjects(6, seed=5)
     g = ReferenceGroup.from_labs(labs)
@@ -143,11 +156,7 @@ def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     def sig_of(c):  # offset in mm: nothing below 5, then a growing sway
         return shape * max(float(c[0]) - 5.0, 0.0)
 
-    scorer = object.__new__(_Scorer)
-    scorer.tests = g.tests
-    scorer.test_masks = [g.rows.test_mask(t.direction, t.level) for t in g.tests]
-    scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
-                                        np.array([8.0]))
+    scorer = _stub_scorer(g, sig_of, 8.0)
     name = "backrest_separation"
     assert max(c[0] for c in Candidate((name,)).start_grid()) < 5.0
     res = scorer.score(sig_of([7.0]), g, [name])
@@ -163,7 +172,7 @@ def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
     model's full strength: only the weak starts below the path find it."""
     from ehm_drake.gap.effects import EFFECTS
     from ehm_drake.gap.models import STRENGTH_PATH, Candidate
-    from ehm_drake.gap.reference import _gain, _Scorer
+    from ehm_drake.gap.reference import _gain
 
     labs, _ = _subjects(6, seed=7)
     g = ReferenceGroup.from_labs(labs)
@@ -180,11 +189,7 @@ def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
             return 0.0 * right
         return right * min(c / c_true, 1.0) + wrong * max(c - c_true, 0.0) / c_true
 
-    scorer = object.__new__(_Scorer)
-    scorer.tests = g.tests
-    scorer.test_masks = [g.rows.test_mask(t.direction, t.level) for t in g.tests]
-    scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
-                                        np.array([20.0]))
+    scorer = _stub_scorer(g, sig_of, 20.0)
     r = sig_of([c_true])
     # Every start on the model's strength path is worse than the effect off.
     none_cost = np.sum(np.abs(r) ** 2)
