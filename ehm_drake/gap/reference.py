@@ -94,19 +94,23 @@ MIN_GAIN = 16.3
 #: refreshed response statistics and each held-out refit take half).
 DESCENT_EVALUATIONS = 16
 #: Where each candidate's fit starts: its strength path (fractions of the
-#: model's plausible range, `models.STRENGTH_PATH`) and, below it, a decade
-#: of weak strengths.  A body that is not the model can carry an effect at a
-#: small fraction of the model's scale of it (the lumped reality's foam
+#: model's plausible range, `models.STRENGTH_PATH`) and "off"; for a
+#: level-dependent (equivalent-linearized) candidate also, below the path, a
+#: decade of weak strengths.  A body that is not the model can carry an effect
+#: at a small fraction of the model's scale of it (the lumped reality's foam
 #: hardening fits best at about 3% of the model's gamma path, and every start
 #: on the path costs more than "off"), and an equivalent-linearized effect's
 #: signature is flat at "off" (its equivalent stiffness is below
 #: `EQUIVALENT_TOL` for the descent's first difference), so no descent from
-#: "off" reaches it.
-START_STRENGTHS = (0.01, 0.03, 0.1, *STRENGTH_PATH)
+#: "off" reaches it.  A linear or delay candidate's signature is smooth at
+#: "off", so the descent from there reaches weak strengths itself; weak starts
+#: for them only add local minima (on the lumped reality's blind seed 2032
+#: they fitted 3-4 ms reflex delays to co-contraction trials).
+WEAK_STRENGTHS = (0.01, 0.03, 0.1)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
 FLAT_PATH = 1e-6
-CACHE_VERSION = "2"
+CACHE_VERSION = "3"
 
 
 # ---------------------------------------------------------------------------
@@ -343,7 +347,9 @@ class _Scorer:
             # of candidates whose path is not flat, and their thresholds.)
             off = np.array([coordinate(p, p.off) if p.off > 0 or not p.log else lo[i]
                             for i, (_, p) in enumerate(cand.params)])
-            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(START_STRENGTHS), off]]
+            strengths = (*WEAK_STRENGTHS, *STRENGTH_PATH) if cand.level_dependent \
+                else STRENGTH_PATH
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(strengths), off]]
             costs = [start_cost(c) for c in starts]
             x = starts[int(np.argmin(costs))]
             if cand.grid_effect is None and len(off) and \
@@ -354,21 +360,38 @@ class _Scorer:
                     x = far
             for nfev in (DESCENT_EVALUATIONS, DESCENT_EVALUATIONS // 2):
                 refresh(x)
-                x = least_squares(lambda c, res=res: res(c, every), x, bounds=(lo, hi),
-                                  diff_step=1e-3, max_nfev=nfev, x_scale="jac").x
+                x = _descend(lambda c, res=res: res(c, every), x, lo, hi, nfev)
             refresh(x)
             s_all = sig(x)
             chi_all, p = rows_chi((r - s_all) * sw, every, every)
             chi_held = np.full(len(r), np.nan)
             for m in self.test_masks:
-                x2 = least_squares(lambda c, m=m, res=res: res(c, ~m), x, bounds=(lo, hi),
-                                   diff_step=1e-3, max_nfev=DESCENT_EVALUATIONS // 2,
-                                   x_scale="jac").x
+                x2 = _descend(lambda c, m=m, res=res: res(c, ~m), x, lo, hi,
+                              DESCENT_EVALUATIONS // 2)
                 chi_held[m] = rows_chi((r - sig(x2)) * sw, ~m, m)[0][m]
             out[name] = {"chi_all": chi_all, "chi_heldout": chi_held,
                          "coords": x.tolist(), "cost": float(np.sum(chi_all) + p),
                          "signature": s_all}
         return out
+
+
+def _descend(fun, x0, lo, hi, max_nfev: int) -> np.ndarray:
+    """Least squares on the box [lo, hi] from x0, in the box's normalized
+    coordinates z = 1 + (x - lo) / (hi - lo), each in [1, 2].
+
+    SciPy's trust-region reflective method starts with a trust radius of
+    |x0| (scaled), and a start on a bound is first moved inside by 1e-10:
+    from an effect "off" at coordinate 0 (no delay, no foam hardening, no
+    added mass) the radius starts at 1e-10 and only doubles per step, so 16
+    evaluations move the fit by about 3e-6 whatever the data say (a 0.9 ms
+    reflex delay ended at 0.42 ms).  In z the radius starts at the box's own
+    size, and the finite-difference step (1e-3 of |z|) is 0.1-0.2% of the
+    box on every coordinate."""
+    width = hi - lo
+    z = least_squares(lambda z: fun(lo + (z - 1.0) * width), 1.0 + (x0 - lo) / width,
+                      bounds=(np.ones_like(lo), np.full_like(lo, 2.0)), diff_step=1e-3,
+                      max_nfev=max_nfev, x_scale="jac").x
+    return np.clip(lo + (z - 1.0) * width, lo, hi)
 
 
 def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
