@@ -103,9 +103,10 @@ DESCENT_EVALUATIONS = 16
 #: signature is flat at "off" (its equivalent stiffness is below
 #: `EQUIVALENT_TOL` for the descent's first difference), so no descent from
 #: "off" reaches it.  A linear or delay candidate's signature is smooth at
-#: "off", so the descent from there reaches weak strengths itself; weak starts
-#: for them only add local minima (on the lumped reality's blind seed 2032
-#: they fitted 3-4 ms reflex delays to co-contraction trials).
+#: "off", so the descent from there (`_descend`) reaches weak strengths
+#: itself; weak starts for them only add local minima (on the lumped
+#: reality's blind seed 2032 they fitted 3-4 ms reflex delays on four trials
+#: where the path's starts found none, one of them that run's false alarm).
 WEAK_STRENGTHS = (0.01, 0.03, 0.1)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
