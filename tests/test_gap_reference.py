@@ -419,7 +419,8 @@ def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():
     0.9 ms delay ended at 0.42 ms), and such a candidate gets no weak starts
     below its strength path: a narrow well at 1% of its strength, which only
     a start there would find, stays unvisited (on the lumped reality's seed
-    2032 such starts fitted 3-4 ms reflex delays to co-contraction trials)."""
+    2032 such starts fitted 3-4 ms reflex delays on four trials where the
+    strength path's starts found none, one of them that run's false alarm)."""
     from ehm_drake.gap.effects import EFFECTS
     from ehm_drake.gap.reference import _gain
 
