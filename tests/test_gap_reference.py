@@ -11,6 +11,8 @@ subject, every candidate with its threshold from the group.
 from __future__ import annotations
 
 import json
+import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -126,16 +128,21 @@ def test_profiled_scatter_gives_the_chi2_of_the_full_covariance():
     assert chi(along) < 0.2 * chi(across)
 
 
-def _stub_scorer(group, sig_of, upper):
+def _stub_scorer(group, sig_of, upper, statics=None):
     """A `_Scorer` on `group` whose every candidate has the one-coordinate
-    signature `sig_of` on [0, upper] (no response statistics to refresh)."""
+    signature `sig_of` on [0, upper] (no response statistics to refresh);
+    with `statics` (`models.Statics`), the pads' static facts of a
+    backrest separation (default: no pad point ever unloads)."""
+    from ehm_drake.gap.models import Statics
     from ehm_drake.gap.reference import _Scorer
 
     scorer = object.__new__(_Scorer)
     scorer.tests = group.tests
     scorer.test_masks = [group.rows.test_mask(t.direction, t.level) for t in group.tests]
+    scorer.statics = statics or Statics(SimpleNamespace(parts=[], penetration=np.zeros(0)),
+                                        np.zeros(0))
     scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
-                                        np.array([upper]))
+                                        scorer.separation_reach(cand, np.array([upper])))
     return scorer
 
 
@@ -162,6 +169,46 @@ def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     res = scorer.score(sig_of([7.0]), g, [name])
     assert res[name]["coords"][0] == pytest.approx(7.0, abs=0.05)
     assert _gain(res[name], res["none"]) > 100
+
+
+def test_a_separation_reaches_the_offset_where_the_anchors_pads_unload():
+    """A body that leans on its backrest harder than the model: the
+    anchor's pads carry 5 and 9 mm and unload at 7.8 and 16.7 mm of offset,
+    beyond the model's 8 mm bound.  The signature first dips (one pad
+    unloading) and rises only once the back support is gone: the fit
+    reaches a 21 mm separation through the pads' unloading starts and the
+    raised bound, and is named with a large gain.  With the model's bound
+    and starts alone it stays near "off" with no gain (the stop-31 fit on
+    `spine5`'s separation trials)."""
+    from ehm_drake.gap.models import Statics
+    from ehm_drake.gap.reference import SEPARATION_REACH, _gain
+
+    labs, _ = _subjects(6, seed=5)
+    g = ReferenceGroup.from_labs(labs)
+    f = g.rows.freq
+    shape = np.exp(-0.5 * ((f - 1.0) / 0.4) ** 2) * (0.8 - 0.3j)
+
+    def sig_of(c):  # offset in mm
+        x = float(c[0])
+        return shape * (-0.8 * math.exp(-((x - 6.0) / 2.0) ** 2) +
+                        0.3 * max(x - 14.0, 0.0))
+
+    info = SimpleNamespace(parts=["pan", "lower_pad", "upper_pad", "floor"],
+                           penetration=np.array([8.6e-3, 5.0e-3, 9.0e-3, 0.3e-3]))
+    statics = Statics(info, np.array([0.19e-3, -0.64e-3, -0.54e-3, -0.02e-3]))
+    unload = statics.pad_unloading_mm()
+    assert unload == pytest.approx([5.0 / 0.64, 9.0 / 0.54])
+    name = "backrest_separation"
+    scorer = _stub_scorer(g, sig_of, 8.0, statics)
+    res = scorer.score(sig_of([21.0]), g, [name])
+    assert 8.0 < SEPARATION_REACH * unload[-1]
+    assert res[name]["coords"][0] == pytest.approx(21.0, abs=0.3)
+    assert _gain(res[name], res["none"]) > 100
+    # The model's own statics (pads that stay loaded) leave the bound at 8
+    # mm: the fit cannot reach the separation.
+    plain = _stub_scorer(g, sig_of, 8.0).score(sig_of([21.0]), g, [name])
+    assert plain[name]["coords"][0] <= 8.0
+    assert _gain(plain[name], plain["none"]) < 0.1 * _gain(res[name], res["none"])
 
 
 def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():

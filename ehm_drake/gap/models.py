@@ -276,6 +276,13 @@ class Statics:
     info: object
     separation_slope: np.ndarray  # d penetration / d offset_mm (m/mm), per point
 
+    def pad_unloading_mm(self) -> np.ndarray:
+        """The backrest offset (mm) at which each pad point's static
+        penetration reaches zero (linear in the offset), sorted; empty when
+        no pad point moves out of contact as the pads move back."""
+        pads = np.isin(self.info.parts, BACK_PADS) & (self.separation_slope < 0)
+        return np.sort(self.info.penetration[pads] / -self.separation_slope[pads])
+
 
 @dataclass
 class Predictor:

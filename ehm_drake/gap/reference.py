@@ -111,7 +111,19 @@ WEAK_STRENGTHS = (0.01, 0.03, 0.1)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
 FLAT_PATH = 1e-6
-CACHE_VERSION = "3"
+#: A backrest separation's offset may reach this multiple of the offset at
+#: which the last pad point unloads at the anchor (the model's own 8 mm bound
+#: is set by the model's pad preload; a body that is not the model can lean on
+#: its backrest harder: on `spine5`'s group the anchor's pads carry 5.1 and
+#: 9.1 mm, and unload only at 8 and 17 mm).  Beyond the unloading, the
+#: probability of contact falls over a few standard deviations of the pad's
+#: compression (about 0.5-1 mm, 1-2 mm of offset), so 1.5x reaches a back
+#: with no support left.  The unloading offsets are also starts of the fit
+#: (`_Scorer.separation_starts`): the cost is not monotonic on the way there
+#: (a pad losing contact softens the trunk's fore-aft mode before the back
+#: support is gone), so no descent from the strength path reaches them.
+SEPARATION_REACH = 1.5
+CACHE_VERSION = "4"
 
 
 # ---------------------------------------------------------------------------
@@ -270,6 +282,7 @@ class _Scorer:
     def __init__(self, group: ReferenceGroup, families: dict, slope, base_names):
         self.rows, self.tests = group.rows, group.tests
         self.families, self.slope, self.base_names = families, slope, base_names
+        self.statics = Statics(families["base"].family.info, slope)
         self.theta0 = np.zeros(len(base_names))
         base = self._predictor(Candidate(()))
         base.update_statistics(self.theta0)
@@ -297,7 +310,40 @@ class _Scorer:
             return _wrap(np.log(pred.predict(th)) - self.log0)
         lo, hi = pred.bounds()
         nb = len(self.base_names)
-        return sig, refresh, lo[nb:], hi[nb:]
+        return sig, refresh, lo[nb:], self.separation_reach(cand, hi[nb:])
+
+    def separation_reach(self, cand: Candidate, hi: np.ndarray) -> np.ndarray:
+        """`hi` with a backrest separation's offset bound raised to
+        `SEPARATION_REACH` times the offset at which the last pad point
+        unloads at the anchor."""
+        i = self._separation_index(cand)
+        unload = self.statics.pad_unloading_mm()
+        if i is None or not len(unload):
+            return hi
+        hi = hi.copy()
+        hi[i] = max(hi[i], SEPARATION_REACH * unload[-1])
+        return hi
+
+    @staticmethod
+    def _separation_index(cand: Candidate) -> int | None:
+        for i, (e, p) in enumerate(cand.params):
+            if e == "backrest_separation" and p.name == "offset_mm":
+                return i
+        return None
+
+    def separation_starts(self, cand: Candidate, off: np.ndarray, hi: np.ndarray) -> list:
+        """Extra starts of a candidate with a backrest separation: the
+        offsets at which each pad point unloads at the anchor, and the far
+        bound (every pad out of contact), the other coordinates "off"."""
+        i = self._separation_index(cand)
+        if i is None:
+            return []
+        out = []
+        for v in (*self.statics.pad_unloading_mm(), hi[i]):
+            c = off.copy()
+            c[i] = min(v, hi[i])
+            out.append(c)
+        return out
 
     def score(self, r: np.ndarray, group: ReferenceGroup, names) -> dict:
         """Fit every candidate in `names` to the residual r (complex log,
@@ -350,7 +396,8 @@ class _Scorer:
                             for i, (_, p) in enumerate(cand.params)])
             strengths = (*WEAK_STRENGTHS, *STRENGTH_PATH) if cand.level_dependent \
                 else STRENGTH_PATH
-            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(strengths), off]]
+            starts = [np.clip(c, lo, hi) for c in [*cand.start_grid(strengths), off,
+                                                   *self.separation_starts(cand, off, hi)]]
             costs = [start_cost(c) for c in starts]
             x = starts[int(np.argmin(costs))]
             if cand.grid_effect is None and len(off) and \
