@@ -41,7 +41,8 @@ def main(argv=None) -> int:
 
     from ehm_drake.gap.blind import score, summarize
     from ehm_drake.gap.diagnose import diagnose, load_lab_data
-    from ehm_drake.gap.reference import diagnose_with_reference, load_reference
+    from ehm_drake.gap.group import load_reference
+    from ehm_drake.gap.reference import diagnose_with_reference
     from ehm_drake.realities import MODEL_REALITY
 
     settings = json.loads((args.run / "blind_settings.json").read_text())

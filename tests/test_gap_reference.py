@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 
 from ehm_drake.gap.diagnose import DiagnosisError, LabData
+from ehm_drake.gap.group import MIN_SUBJECTS, ReferenceGroup
 from ehm_drake.gap.localize import Rows, band_index
 from ehm_drake.gap.models import TestInput as _TestInput
-from ehm_drake.gap.reference import MIN_SUBJECTS, ReferenceGroup, profile_nuisance
+from ehm_drake.gap.reference import profile_nuisance
 
 
 def _lab(H_of_row, tests=(("z", 0.3), ("z", 0.6)), name="s"):

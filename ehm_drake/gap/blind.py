@@ -92,7 +92,7 @@ class BlindSpec:
     def validate(self) -> None:
         if self.trials < 1:
             raise BlindError(f"--trials must be >= 1, got {self.trials}")
-        from .reference import MIN_SUBJECTS
+        from .group import MIN_SUBJECTS
         if self.references and self.references < MIN_SUBJECTS:
             raise BlindError(f"--references must be 0 or >= {MIN_SUBJECTS}, got "
                              f"{self.references}")

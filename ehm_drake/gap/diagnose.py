@@ -206,7 +206,8 @@ def scoring_fingerprint() -> str:
     """Hash of the sources that score a candidate on a residual (cached
     reference-group thresholds from other scoring code are never reused)."""
     here = Path(__file__).resolve().parent
-    return _sources_fingerprint(here / n for n in ("models.py", "reference.py", "localize.py"))
+    return _sources_fingerprint(here / n for n in ("models.py", "group.py", "reference.py",
+                                                   "localize.py"))
 
 
 def _family_key(params: ModelParams, measures: BodyMeasures, base_names, spec) -> str:

@@ -43,13 +43,10 @@ with the group; the model gives only the *shape* of each candidate effect:
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
 import time
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -74,15 +71,10 @@ from .diagnose import (
     scoring_fingerprint,
     separation_slope,
 )
-from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize, mark_after
+from .group import ReferenceGroup, load_reference, wrap_log
+from .localize import BANDS, MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
 from .models import STRENGTH_PATH, Candidate, Predictor, Statics, coordinate
 
-#: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
-#: each group it forms, and the scatter's variance needs a few subjects.
-MIN_SUBJECTS = 4
-#: Bins of the running mean of the group's variance per channel (a variance
-#: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).
-VARIANCE_SMOOTHING_BINS = 5
 #: The chance that a subject without any effect has one named (family-wise,
 #: over the candidates scored): the false-alarm bar of the validation (10%),
 #: Bonferroni-split between the candidates (`null_threshold`).
@@ -126,148 +118,6 @@ SEPARATION_REACH = 1.5
 CACHE_VERSION = "4"
 
 
-# ---------------------------------------------------------------------------
-# The group
-# ---------------------------------------------------------------------------
-
-
-def _row_keys(rows: Rows) -> list[str]:
-    return [f"{d}|{c}|{lv:.6g}|{f:.6f}" for d, c, lv, f in
-            zip(rows.direction, rows.channel, rows.level, rows.freq, strict=True)]
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    """log H with its phase wrapped to (-pi, pi]."""
-    return x.real + 1j * (np.pi - (np.pi - x.imag) % (2 * np.pi))
-
-
-def _smooth(rows: Rows, v: np.ndarray, n: int = VARIANCE_SMOOTHING_BINS) -> np.ndarray:
-    """Running mean of `v` over `n` frequency bins within each test and
-    channel (rows are in frequency order there)."""
-    out = np.empty_like(v)
-    keys = [f"{d}|{c}|{lv:.6g}" for d, c, lv in zip(rows.direction, rows.channel, rows.level,
-                                                     strict=True)]
-    _, inv = np.unique(keys, return_inverse=True)
-    kernel = np.ones(n)
-    for k in range(inv.max() + 1):
-        m = np.flatnonzero(inv == k)
-        m = m[np.argsort(rows.freq[m])]
-        out[m] = np.convolve(v[m], kernel, "same") / np.convolve(np.ones(len(m)), kernel, "same")
-    return out
-
-
-@dataclass
-class ReferenceGroup:
-    """K subjects measured with one protocol, without the effects in
-    question.  `rows`: the protocol's rows (H = the group's geometric mean,
-    gain and phase); `deviations` (K, rows): each subject's log H minus the
-    mean; `variance`: their smoothed variance per row (complex, both
-    components)."""
-
-    sources: list[str]
-    rows: Rows
-    tests: list
-    mean_log: np.ndarray
-    deviations: np.ndarray
-    variance: np.ndarray
-
-    @property
-    def size(self) -> int:
-        return len(self.deviations)
-
-    @classmethod
-    def from_labs(cls, labs: list[LabData]) -> ReferenceGroup:
-        if len(labs) < MIN_SUBJECTS:
-            raise DiagnosisError(f"a reference group needs at least {MIN_SUBJECTS} subjects, "
-                                 f"got {len(labs)}")
-        keys = [_row_keys(lab.rows) for lab in labs]
-        common = set(keys[0]).intersection(*keys[1:])
-        first = labs[0]
-        keep = np.array([k in common for k in keys[0]])
-        if keep.sum() < 0.5 * len(keys[0]):
-            raise DiagnosisError(
-                "the reference subjects were not measured with one protocol: they share "
-                f"{int(keep.sum())} of {len(keys[0])} rows (tests, channels, frequencies) of "
-                f"{first.source}")
-        rows = first.rows.take(keep)
-        order = [k for k in keys[0] if k in common]
-        logs = []
-        for lab, ks in zip(labs, keys, strict=True):
-            idx = {k: i for i, k in enumerate(ks)}
-            H = lab.rows.H[[idx[k] for k in order]]
-            if np.any(~np.isfinite(H)) or np.any(H == 0):
-                raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in "
-                                     "the reference data")
-            logs.append(np.log(H))
-        pivot = logs[0]
-        rel = np.array([_wrap(x - pivot) for x in logs])
-        mean_rel = rel.mean(axis=0)
-        dev = rel - mean_rel
-        K = len(labs)
-        var = np.sum(np.abs(dev) ** 2, axis=0) / (K - 1)
-        mean_log = pivot + mean_rel
-        tests_there = {(d, round(lv, 6)) for d, lv in rows.tests}
-        tests = [t for t in first.tests if (t.direction, round(t.level, 6)) in tests_there]
-        return cls([lab.source for lab in labs], dataclasses.replace(rows, H=np.exp(mean_log)),
-                   tests, mean_log, dev, _smooth(rows, var))
-
-    def without(self, j: int) -> ReferenceGroup:
-        """The group less subject j (its deviations re-centred)."""
-        keep = [i for i in range(self.size) if i != j]
-        dev = self.deviations[keep]
-        shift = dev.mean(axis=0)
-        dev = dev - shift
-        var = np.sum(np.abs(dev) ** 2, axis=0) / (len(keep) - 1)
-        mean_log = self.mean_log + shift
-        return ReferenceGroup([self.sources[i] for i in keep],
-                              dataclasses.replace(self.rows, H=np.exp(mean_log)), self.tests,
-                              mean_log, dev, _smooth(self.rows, var))
-
-    def subject_log(self, j: int) -> np.ndarray:
-        return self.mean_log + self.deviations[j]
-
-    def fingerprint(self) -> str:
-        h = hashlib.sha256()
-        for a in (self.mean_log, self.deviations, self.rows.freq, self.rows.level):
-            h.update(np.ascontiguousarray(a).tobytes())
-        h.update("|".join(_row_keys(self.rows)).encode())
-        return h.hexdigest()[:20]
-
-    def align(self, lab: LabData) -> np.ndarray:
-        """Index of each group row in the subject's rows; a clear error when
-        the subject lacks a test or channel of the group's protocol."""
-        idx = {k: i for i, k in enumerate(_row_keys(lab.rows))}
-        missing = [k for k in _row_keys(self.rows) if k not in idx]
-        if missing:
-            d, c, lv, f = missing[0].split("|")
-            raise DiagnosisError(
-                f"{lab.source}: {len(missing)} rows of the reference protocol are not in the "
-                f"data (first: direction {d}, level {lv} m/s^2, channel {c}, {f} Hz); the "
-                "subject and the reference group must be measured with the same tests")
-        return np.array([idx[k] for k in _row_keys(self.rows)])
-
-
-def expand_reference_paths(paths) -> list[Path]:
-    """Subject folders: each path is a subject (frf.csv or timeseries.csv
-    in it, or an frf.csv) or a folder of subject folders."""
-    out = []
-    for p in map(Path, paths):
-        if p.is_file() or (p / "frf.csv").is_file() or (p / "timeseries.csv").is_file():
-            out.append(p)
-        elif p.is_dir():
-            subs = sorted(q for q in p.iterdir() if q.is_dir() and (
-                (q / "frf.csv").is_file() or (q / "timeseries.csv").is_file()))
-            if not subs:
-                raise DiagnosisError(f"{p}: no subject data (frf.csv) in it or its subfolders")
-            out += subs
-        else:
-            raise FileNotFoundError(f"reference data not found: {p}")
-    return out
-
-
-def load_reference(paths, channels: str = "plane") -> ReferenceGroup:
-    return ReferenceGroup.from_labs([load_lab_data(p, channels)
-                                     for p in expand_reference_paths(paths)])
 
 
 # ---------------------------------------------------------------------------
@@ -307,7 +157,7 @@ class _Scorer:
 
         def sig(c):
             th = np.concatenate([self.theta0, c])
-            return _wrap(np.log(pred.predict(th)) - self.log0)
+            return wrap_log(np.log(pred.predict(th)) - self.log0)
         lo, hi = pred.bounds()
         nb = len(self.base_names)
         return sig, refresh, lo[nb:], self.separation_reach(cand, hi[nb:])
@@ -503,7 +353,7 @@ def _null_job(j: int) -> dict:
     """Subject j of the group against the other K - 1: held-out gains."""
     g = _W["group"]
     sub = g.without(j)
-    r = _wrap(g.subject_log(j) - sub.mean_log)
+    r = wrap_log(g.subject_log(j) - sub.mean_log)
     res = _scorer().score(r, sub, _W["names"])
     return {"subject": j, "gains": {n: _gain(res[n], res["none"]) for n in _W["names"]}}
 
@@ -593,7 +443,7 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     anchor_key = hashlib.sha256(json.dumps(anchor["log_scales"]).encode()).hexdigest()[:16]
     nulls = null_gains(group, families, slope, base_names, names, workers,
                        lambda done, total: null_prog.update(done), use_cache, anchor_key)
-    residual = _wrap(np.log(H) - group.mean_log)
+    residual = wrap_log(np.log(H) - group.mean_log)
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
              "names": names, "residual": residual}
     fit_prog = Progress("diagnose: candidates", len(names) + 1, progress, unit="fitted")
@@ -625,7 +475,7 @@ def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
     the cells beyond the group mean's uncertainty plus the model floor, each
     with its RMS log-gain difference."""
     rows = group.rows
-    d = _wrap(log_model - group.mean_log)
+    d = wrap_log(log_model - group.mean_log)
     chi = np.abs(d) ** 2 / (group.variance / group.size + 2 * MODEL_FLOOR**2)
     cells = localize(rows, chi)
     lo = np.array([b[0] for b in BANDS])[rows.band]
