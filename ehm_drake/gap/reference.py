@@ -107,10 +107,12 @@ FLAT_PATH = 1e-6
 #: which the last pad point unloads at the anchor (the model's own 8 mm bound
 #: is set by the model's pad preload; a body that is not the model can lean on
 #: its backrest harder: on `spine5`'s group the anchor's pads carry 5.1 and
-#: 9.1 mm, and unload only at 8 and 17 mm).  Beyond the unloading, the
-#: probability of contact falls over a few standard deviations of the pad's
-#: compression (about 0.5-1 mm, 1-2 mm of offset), so 1.5x reaches a back
-#: with no support left.  The unloading offsets are also starts of the fit
+#: 9.1 mm, and unload only at 8 and 17 mm; on `lumped`'s at 7.5 and 18 mm).
+#: Beyond the unloading, the probability of contact falls over a few standard
+#: deviations of the pad's compression (at those anchors 0.3-1.3 mm in the
+#: fore-aft tests, 0.1-0.3 mm in the vertical ones: up to about 2.5 mm of
+#: offset each), so 1.5x (8-9 mm beyond) reaches a back with no support left.
+#: The unloading offsets are also starts of the fit
 #: (`_Scorer.separation_starts`): the cost is not monotonic on the way there
 #: (a pad losing contact softens the trunk's fore-aft mode before the back
 #: support is gone), so no descent from the strength path reaches them.
