@@ -186,12 +186,15 @@ class _Scorer:
     def separation_starts(self, cand: Candidate, off: np.ndarray, hi: np.ndarray) -> list:
         """Extra starts of a candidate with a backrest separation: the
         offsets at which each pad point unloads at the anchor, and the far
-        bound (every pad out of contact), the other coordinates "off"."""
+        bound (every pad out of contact), the other coordinates "off"; none
+        when no pad point unloads (as `separation_reach` then leaves the
+        bound)."""
         i = self._separation_index(cand)
-        if i is None:
+        unload = self.statics.pad_unloading_mm()
+        if i is None or not len(unload):
             return []
         out = []
-        for v in (*self.statics.pad_unloading_mm(), hi[i]):
+        for v in (*unload, hi[i]):
             c = off.copy()
             c[i] = min(v, hi[i])
             out.append(c)
