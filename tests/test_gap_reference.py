@@ -460,6 +460,49 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
         null_threshold([5.0], 8, name="arms")
 
 
+def test_a_candidate_no_reference_subject_fits_borrows_the_groups_spread():
+    """A degenerate null (every reference subject's gain 0: the candidate's
+    fit stays off on all of them) would give `MIN_GAIN`, and one more
+    subject that fits it at all is named.  Its threshold borrows the group's
+    typical spread instead.  The nulls are `spine5`'s seed-2034 group at
+    stop 32, where a subject with no hidden effect reached 180 with the
+    backrest separation and was named."""
+    from ehm_drake.gap.reference import (
+        DEGENERATE_GAIN,
+        MIN_GAIN,
+        group_null_spread,
+        null_threshold,
+    )
+
+    nulls = {"reflex_delay": [9, 0, -5, 17, 0, -6, 342, 37],
+             "seat_foam_stiffening": [0, 6, 12, 0, -1449, 0, -93, 64],
+             "seat_friction": [17, 0, 0, -1237, 0, 52, 0, 0],
+             "backrest_separation": [0.0] * 8,
+             "arms": [-57, 203, -30, -706, -125, 121, -603, -240],
+             "visceral_mass": [7, 7, -3, 2, 0, -2, 299, 0],
+             "cocontraction": [-15, -81, 0, 0, -162, 0, 0, 0],
+             "seat_cushion_dynamics": [-8, 72, -3, -38, -82, 144, -3, 25]}
+    spread = group_null_spread(nulls)
+    stds = sorted(np.std(g, ddof=1) for g in nulls.values())
+    assert stds[3] < spread < stds[4]  # the median variance's root: 105-119
+    sep = nulls["backrest_separation"]
+    assert null_threshold(sep, 8) == MIN_GAIN
+    borrowed = null_threshold(sep, 8, borrowed_spread=spread)
+    assert borrowed > 180 and borrowed > 10 * MIN_GAIN
+    # Round-off-sized gains are still degenerate; one subject that fits is not.
+    assert null_threshold([0.4, -0.2, 0, 0, 0, 0, 0, 0.9], 8, borrowed_spread=spread) > 180
+    assert DEGENERATE_GAIN < 5
+    one = [0, 0, 0, 0, 0, 0, 0, 5.0]
+    assert null_threshold(one, 8, borrowed_spread=spread) == null_threshold(one, 8) < 50
+    # A candidate with a spread of its own keeps its threshold.
+    for name, g in nulls.items():
+        if name != "backrest_separation":
+            assert null_threshold(g, 8, borrowed_spread=spread) == null_threshold(g, 8)
+    # Failed nulls (None) are left out; without two finite gains anywhere, None.
+    assert group_null_spread({**nulls, "arms": [None] * 8}) > 0
+    assert group_null_spread({"arms": [None, 3.0]}) is None
+
+
 def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():
     """A delay's (or a linear extension's) signature is smooth at "off", so
     the descent from "off" reaches a weak effect by itself (it did not while

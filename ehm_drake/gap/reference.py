@@ -31,7 +31,8 @@ with the group; the model gives only the *shape* of each candidate effect:
    subjects without any effect.  A candidate is named when its gain
    exceeds the upper prediction bound of these K gains for one more subject
    (Student t, family-wise `FAMILY_ALPHA` over the candidates;
-   `null_threshold`), and `MIN_GAIN`.
+   `null_threshold`), and `MIN_GAIN`.  A candidate that no reference
+   subject fits (every null gain 0) borrows the group's typical spread.
 6. Verdict: `explained` (the largest held-out gain among the candidates
    beyond their null), `ambiguous` (another within `AMBIGUITY_MARGIN` of
    its held-out share), `unexplained` (the subject differs from the group
@@ -82,6 +83,13 @@ FAMILY_ALPHA = 0.10
 #: ... and at least this held-out chi^2 gain (the 0.1% point of chi^2 with 3
 #: degrees of freedom: a candidate of up to 3 parameters at p < 0.001).
 MIN_GAIN = 16.3
+#: A candidate's null is degenerate when every reference subject's gain is
+#: within this of 0 (its fit stays "off" up to round-off; the blind run's
+#: scoring gives such a candidate no rank either): its threshold then
+#: borrows the group's typical spread (`null_threshold`).  On `spine5`'s
+#: seed-2034 group the separation's null was 8 exact zeros, its threshold
+#: `MIN_GAIN`, and a no-effect subject was named with a gain of 180.
+DEGENERATE_GAIN = 1.0
 #: Evaluations of a candidate's descent on all tests (a second descent from
 #: refreshed response statistics and each held-out refit take half).
 DESCENT_EVALUATIONS = 16
@@ -309,7 +317,7 @@ def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
 
 
 def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
-                   name: str = "a candidate") -> float:
+                   name: str = "a candidate", borrowed_spread: float | None = None) -> float:
     """The held-out gain a candidate must exceed to be named: the one-sided
     upper prediction bound, at level alpha / n_candidates, of one more
     subject's gain from the K gains of the group's own subjects (`null`,
@@ -317,7 +325,15 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     gains -- and at least `MIN_GAIN`.  The spread counts, not only the
     largest: a candidate whose fit ends at a bound on every subject (gains
     -900 to -100) can still reach +150 on the next one, which twice the
-    largest (-100) would not cover.  `name`: the candidate, for errors."""
+    largest (-100) would not cover.  `name`: the candidate, for errors.
+
+    A degenerate null -- every gain within `DEGENERATE_GAIN` of 0: the
+    candidate's fit stays "off" on every reference subject -- has no spread
+    of its own, and its bound would fall to `MIN_GAIN` although K subjects
+    cannot show that one more stays off (with K = 8, 0 of 8 is compatible
+    with one subject in four fitting it, at 90% confidence).  Its spread is
+    then `borrowed_spread`, the group's typical one (`borrowed_spread`:
+    the median of the candidates' null variances, square-rooted)."""
     g = np.asarray([x for x in null if x is not None], float)
     if len(g) < 2 or not np.all(np.isfinite(g)):
         raise DiagnosisError(f"{name}: the reference group's null needs at least 2 finite "
@@ -326,9 +342,25 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
         raise ValueError(f"n_candidates >= 1 and 0 < alpha < 1 needed, got {n_candidates}, "
                          f"{alpha}")
     k = len(g)
-    bound = g.mean() + student_t.ppf(1 - alpha / n_candidates, k - 1) * g.std(ddof=1) * \
+    spread = g.std(ddof=1)
+    if borrowed_spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
+        spread = max(spread, float(borrowed_spread))
+    bound = g.mean() + student_t.ppf(1 - alpha / n_candidates, k - 1) * spread * \
         math.sqrt(1 + 1 / k)
     return float(max(MIN_GAIN, bound))
+
+
+def group_null_spread(nulls: dict) -> float | None:
+    """The spread of a typical candidate's null gains on the group: the
+    square root of the median, over the candidates, of their null gains'
+    variance (None without any candidate of 2 finite gains).  What a
+    degenerate null borrows (`null_threshold`)."""
+    var = []
+    for gains in nulls.values():
+        g = np.asarray([x for x in gains if x is not None], float)
+        if len(g) >= 2 and np.all(np.isfinite(g)):
+            var.append(g.var(ddof=1))
+    return float(math.sqrt(np.median(var))) if var else None
 
 
 def _gain(res: dict, base: dict) -> float:
@@ -500,12 +532,13 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
     base = results["none"]
     n_rows = len(rows)
     ranking = []
+    spread = group_null_spread({n: nulls.get(n, []) for n in names})
     for n in names:
         r = results[n]
         cand = Candidate(tuple(n.split("+")))
         gain = _gain(r, base)
         null = [g for g in nulls.get(n, []) if g is not None]
-        threshold = null_threshold(null, len(names), name=n)
+        threshold = null_threshold(null, len(names), name=n, borrowed_spread=spread)
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
@@ -589,6 +622,8 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         "method": {"design": "reference group", "folds": "test",
                    "heldout_sets": [f"{t.direction}@{t.level:g}" for t in group.tests],
                    "null_alpha": FAMILY_ALPHA, "min_gain": MIN_GAIN,
+                   "degenerate_null_gain": DEGENERATE_GAIN,
+                   "borrowed_null_spread": spread,
                    "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
                    "model_floor": MODEL_FLOOR,
                    "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "
