@@ -70,12 +70,13 @@ def main(argv=None) -> int:
                    reality != MODEL_REALITY)
         new = {k: v for k, v in old.items() if k not in ("score",)}
         new["score"] = sc
-        new["ranking"] = [{k: e.get(k) for k in ("effect", "heldout_gain", "null_threshold",
+        new["ranking"] = [{k: e.get(k) for k in ("effect", "heldout_gain", "level_gain",
+                                                 "evidence", "null_threshold",
                                                  "beyond_null", "gap_reduction_heldout",
                                                  "params")} for e in rep["ranking"]]
         results.append(new)
         was = old.get("score", {}).get("predicted_label", "-")
-        top = ", ".join(f"{e['effect']} {e.get('heldout_gain', 0):.0f}/"
+        top = ", ".join(f"{e['effect']} {e.get('evidence', e.get('heldout_gain', 0)):.0f}/"
                         f"{e.get('null_threshold', 0):.0f}" for e in rep["ranking"][:3])
         print(f"trial {old['trial']:3d} {sc['truth_label']:40s} -> {sc['predicted_label']:24s}"
               f" (was {was}; det {'y' if sc['detectable'] else 'n'}; "

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from ehm_drake.gap.diagnose import DiagnosisError, LabData
-from ehm_drake.gap.group import MIN_SUBJECTS, ReferenceGroup
+from ehm_drake.gap.group import MIN_SUBJECTS, ReferenceGroup, level_pairs
 from ehm_drake.gap.localize import Rows, band_index
 from ehm_drake.gap.models import TestInput as _TestInput
 from ehm_drake.gap.reference import profile_nuisance
@@ -144,6 +144,7 @@ def _stub_scorer(group, sig_of, upper, statics=None):
                                         np.zeros(0))
     scorer.signature_fn = lambda cand: (sig_of, lambda c: None, np.array([0.0]),
                                         scorer.separation_reach(cand, np.array([upper])))
+    scorer.level_pairs = level_pairs(group.rows)
     return scorer
 
 
@@ -501,6 +502,73 @@ def test_a_candidate_no_reference_subject_fits_borrows_the_groups_spread():
     # Failed nulls (None) are left out; without two finite gains anywhere, None.
     assert group_null_spread({**nulls, "arms": [None] * 8}) > 0
     assert group_null_spread({"arms": [None, 3.0]}) is None
+
+
+def test_level_pairs_match_each_higher_level_with_the_lowest_of_its_direction():
+    """Rows pair by direction, channel and frequency: z@0.6 with z@0.3, x@0.9
+    with x@0.3 (not with z), nothing for a single level or unknown levels."""
+    lab = _lab(lambda f, lv, ch: 1 + f + lv + 1j * ch,
+               tests=(("z", 0.3), ("z", 0.6), ("x", 0.3), ("x", 0.9), ("y", 0.5)))
+    rows = lab.rows
+    lo, hi = level_pairs(rows)
+    assert len(lo) == 2 * 2 * 39  # (z, x) x 2 channels x 39 bins; y has one level
+    for i, j in zip(lo, hi, strict=True):
+        assert rows.direction[i] == rows.direction[j] != "y"
+        assert rows.channel[i] == rows.channel[j] and rows.freq[i] == rows.freq[j]
+        assert rows.level[i] == 0.3 and rows.level[j] in (0.6, 0.9)
+    single = _lab(lambda f, lv, ch: 1 + f + 0j, tests=(("z", 0.3), ("x", 0.3)))
+    assert len(level_pairs(single.rows)[0]) == 0
+    unknown = _lab(lambda f, lv, ch: 1 + f + 0j, tests=(("z", float("nan")), ("z", 0.6)))
+    assert len(level_pairs(unknown.rows)[0]) == 0
+
+
+def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_effect():
+    """A subject far outside the group's scatter by a structural difference
+    that is the same at both levels (a resonance the group does not have),
+    plus a co-contraction-like effect that grows with the level.  On all
+    rows the structure dominates; on the level differences it cancels, the
+    effect is fitted (its strength within 5%) and gains far more than it
+    does on a subject with the structure alone (which gains nothing there).
+    A candidate that does not depend on the level has no level fit."""
+    from ehm_drake.gap.reference import _evidence, _gain
+
+    rng = np.random.default_rng(11)
+    labs = []
+    for k in range(8):
+        a, b = rng.normal(0, 0.2), rng.normal(0, 0.3)
+        e = rng.normal(0, 0.03, 2)
+
+        def H(f, lv, ch, a=a, b=b, e=e):  # small subject-specific level dependence
+            return (1 + f / 5) * np.exp(a + 1j * b + lv * (e[0] + 1j * e[1]) * f / 12)
+        labs.append(_lab(H, name=f"s{k}"))
+    g = ReferenceGroup.from_labs(labs)
+    f, lv = g.rows.freq, g.rows.level
+    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
+
+    def sig_of(c):  # stiffer with the level: the effect's change grows with it
+        return float(c[0]) * lv * shape
+
+    structure = 2.5 * np.exp(-0.5 * ((f - 3.0) / 0.7) ** 2) * (1 - 0.6j)
+    scorer = _stub_scorer(g, sig_of, 4.0)
+    name = "cocontraction"
+    both = scorer.score(structure + sig_of([1.5]), g, [name, "visceral_mass"])
+    alone = scorer.score(structure, g, [name, "visceral_mass"])
+    chi_structure = np.sum(alone["none"]["chi_all"])
+    assert chi_structure > 4 * len(f)  # far outside the group's scatter
+    assert both[name]["level_coords"][0] == pytest.approx(1.5, rel=0.05)
+    assert both[name]["level_gain"] > 100
+    assert alone[name]["level_gain"] < 0.01 * both[name]["level_gain"]
+    assert _evidence(both[name], both["none"]) == pytest.approx(
+        _gain(both[name], both["none"]) + both[name]["level_gain"])
+    for res in (both, alone):
+        assert res["visceral_mass"]["level_gain"] == 0.0
+        assert res["visceral_mass"]["level_coords"] is None
+    # One level only: no level design, the evidence is the held-out gain.
+    one = ReferenceGroup.from_labs([_lab(lambda f_, lv_, ch, L=lab: L.rows.H[:len(f_)],
+                                         tests=(("z", 0.3),)) for lab in labs])
+    single = _stub_scorer(one, lambda c: float(c[0]) * 0.3 * shape[:len(one.rows.freq)], 4.0)
+    res = single.score(structure[:len(one.rows.freq)], one, [name])
+    assert res[name]["level_gain"] == 0.0
 
 
 def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():

@@ -250,7 +250,8 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
     # of held-out chi^2 (its effect fitted off, up to round-off) has no
     # rank: such ties keep the candidate list's order and would count for
     # top-3 by chance.
-    ranking = [e["effect"] for e in entries if e.get("heldout_gain", 2.0) > 1.0]
+    ranking = [e["effect"] for e in entries
+               if e.get("evidence", e.get("heldout_gain", 2.0)) > 1.0]
     predicted = report.get("best_effect") if verdict in ("explained", "ambiguous") else None
     label_pred = predicted or verdict
     red = [e["effect_share" if structural else "gap_reduction_heldout"] for e in entries

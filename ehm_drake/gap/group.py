@@ -34,7 +34,32 @@ def wrap_log(x: np.ndarray) -> np.ndarray:
     return x.real + 1j * (np.pi - (np.pi - x.imag) % (2 * np.pi))
 
 
-def _smooth(rows: Rows, v: np.ndarray, n: int = VARIANCE_SMOOTHING_BINS) -> np.ndarray:
+def level_pairs(rows: Rows) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): the rows measured in one direction, channel and frequency
+    at two levels, each higher level with the lowest of its direction (index
+    arrays into `rows`; empty without a second level or where the levels
+    are not given)."""
+    lowest: dict = {}
+    for d, lv in zip(rows.direction, rows.level, strict=True):
+        if np.isfinite(lv):
+            lowest[d] = min(lowest.get(d, np.inf), round(float(lv), 6))
+    at_lowest = {}
+    for i, (d, c, lv, f) in enumerate(zip(rows.direction, rows.channel, rows.level, rows.freq,
+                                          strict=True)):
+        if np.isfinite(lv) and round(float(lv), 6) == lowest[d]:
+            at_lowest[(d, c, round(float(f), 6))] = i
+    lo, hi = [], []
+    for i, (d, c, lv, f) in enumerate(zip(rows.direction, rows.channel, rows.level, rows.freq,
+                                          strict=True)):
+        j = at_lowest.get((d, c, round(float(f), 6)))
+        if np.isfinite(lv) and round(float(lv), 6) > lowest[d] and j is not None:
+            lo.append(j)
+            hi.append(i)
+    return np.array(lo, dtype=int), np.array(hi, dtype=int)
+
+
+def smooth_over_frequency(rows: Rows, v: np.ndarray,
+                          n: int = VARIANCE_SMOOTHING_BINS) -> np.ndarray:
     """Running mean of `v` over `n` frequency bins within each test and
     channel (rows are in frequency order there)."""
     out = np.empty_like(v)
@@ -102,7 +127,7 @@ class ReferenceGroup:
         tests_there = {(d, round(lv, 6)) for d, lv in rows.tests}
         tests = [t for t in first.tests if (t.direction, round(t.level, 6)) in tests_there]
         return cls([lab.source for lab in labs], dataclasses.replace(rows, H=np.exp(mean_log)),
-                   tests, mean_log, dev, _smooth(rows, var))
+                   tests, mean_log, dev, smooth_over_frequency(rows, var))
 
     def without(self, j: int) -> ReferenceGroup:
         """The group less subject j (its deviations re-centred)."""
@@ -114,7 +139,7 @@ class ReferenceGroup:
         mean_log = self.mean_log + shift
         return ReferenceGroup([self.sources[i] for i in keep],
                               dataclasses.replace(self.rows, H=np.exp(mean_log)), self.tests,
-                              mean_log, dev, _smooth(self.rows, var))
+                              mean_log, dev, smooth_over_frequency(self.rows, var))
 
     def subject_log(self, j: int) -> np.ndarray:
         return self.mean_log + self.deviations[j]

@@ -117,12 +117,17 @@ def markdown(rep: dict, figures: list[str]) -> str:
         lines += [f"## Reference group ({ref['size']} subjects)", "",
                   "The subject is compared with the group; the model, refit to the group mean "
                   "(re-linearized), gives the shape of each candidate. A candidate is named "
-                  "when its held-out chi^2 gain exceeds the threshold set by the group's own "
-                  "subjects (each against the others).", "",
-                  "| effect | held-out chi^2 gain | threshold (group's own subjects) | "
-                  "beyond |", "|---|---|---|---|"]
-        lines += [f"| {e['effect']} | {e['heldout_gain']:.0f} | {e['null_threshold']:.0f} | "
-                  f"{'yes' if e['beyond_null'] else 'no'} |" for e in rep["ranking"]]
+                  "when its evidence -- its held-out chi^2 gain plus, for an effect that "
+                  "depends on the level, its gain on the differences between the levels, "
+                  "where the subject's structural difference from the group cancels -- "
+                  "exceeds the threshold set by the group's own subjects (each against the "
+                  "others).", "",
+                  "| effect | held-out chi^2 gain | level-difference gain | evidence | "
+                  "threshold (group's own subjects) | beyond |", "|---|---|---|---|---|---|"]
+        lines += [f"| {e['effect']} | {e['heldout_gain']:.0f} | "
+                  f"{e.get('level_gain', 0.0):.0f} | {e.get('evidence', e['heldout_gain']):.0f} | "
+                  f"{e['null_threshold']:.0f} | {'yes' if e['beyond_null'] else 'no'} |"
+                  for e in rep["ranking"]]
         lines += ["", f"Model-form gap (the model refit to the group against the group mean): "
                   f"RMS log gain {mf['rms_log_gain_difference']:.2f}, phase "
                   f"{mf['rms_phase_difference_deg']:.0f} deg RMS, {mf['significant_cells']} "
