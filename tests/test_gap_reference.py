@@ -424,7 +424,7 @@ def test_null_threshold_is_an_exact_prediction_bound_for_normal_gains():
     more subject's gain with probability alpha / n (the Student-t prediction
     bound), whatever the gains' location and spread: checked by drawing
     20000 groups of K = 8 and one more subject each (seeded)."""
-    from ehm_drake.gap.reference import MIN_GAIN, null_threshold
+    from ehm_drake.gap.calibration import MIN_GAIN, null_threshold
 
     rng = np.random.default_rng(3)
     for loc, scale in ((500.0, 200.0), (-400.0, 300.0)):
@@ -445,7 +445,7 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
     negative, spread several hundred) gets a threshold well above its largest
     null gain; identical null gains give MIN_GAIN; more candidates, a higher
     bar; bad nulls are refused."""
-    from ehm_drake.gap.reference import MIN_GAIN, null_threshold
+    from ehm_drake.gap.calibration import MIN_GAIN, null_threshold
 
     arms = [-439, -509, -943, -880, -115, -737, -189, -119]
     thr = null_threshold(arms, 8, alpha=0.1)
@@ -468,7 +468,7 @@ def test_a_candidate_no_reference_subject_fits_borrows_the_groups_spread():
     typical spread instead.  The nulls are `spine5`'s seed-2034 group at
     stop 32, where a subject with no hidden effect reached 180 with the
     backrest separation and was named."""
-    from ehm_drake.gap.reference import (
+    from ehm_drake.gap.calibration import (
         DEGENERATE_GAIN,
         MIN_GAIN,
         group_null_spread,

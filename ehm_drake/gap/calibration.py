@@ -1,0 +1,76 @@
+"""Thresholds of the gap diagnosis against a reference group: how much
+evidence a candidate must show to be named, from the evidence it reaches on
+the group's own subjects, each scored against the others (leave one out;
+`reference.null_gains`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.stats import t as student_t
+
+from .diagnose import DiagnosisError
+
+#: The chance that a subject without any effect has one named (family-wise,
+#: over the candidates scored): the false-alarm bar of the validation (10%),
+#: Bonferroni-split between the candidates (`null_threshold`).
+FAMILY_ALPHA = 0.10
+#: ... and at least this chi^2 gain (the 0.1% point of chi^2 with 3
+#: degrees of freedom: a candidate of up to 3 parameters at p < 0.001).
+MIN_GAIN = 16.3
+#: A candidate's null is degenerate when every reference subject's gain is
+#: within this of 0 (its fit stays "off" up to round-off; the blind run's
+#: scoring gives such a candidate no rank either): its threshold then
+#: borrows the group's typical spread (`null_threshold`).  On `spine5`'s
+#: seed-2034 group the separation's null was 8 exact zeros, its threshold
+#: `MIN_GAIN`, and a no-effect subject was named with a gain of 180.
+DEGENERATE_GAIN = 1.0
+
+
+def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
+                   name: str = "a candidate", borrowed_spread: float | None = None) -> float:
+    """The evidence (`reference._evidence`: held-out gain plus level
+    gain) a candidate must exceed to be named: the one-sided
+    upper prediction bound, at level alpha / n_candidates, of one more
+    subject's gain from the K gains of the group's own subjects (`null`,
+    leave one out), mean + t_{K-1} s sqrt(1 + 1/K) -- exact for normal
+    gains -- and at least `MIN_GAIN`.  The spread counts, not only the
+    largest: a candidate whose fit ends at a bound on every subject (gains
+    -900 to -100) can still reach +150 on the next one, which twice the
+    largest (-100) would not cover.  `name`: the candidate, for errors.
+
+    A degenerate null -- every gain within `DEGENERATE_GAIN` of 0: the
+    candidate's fit stays "off" on every reference subject -- has no spread
+    of its own, and its bound would fall to `MIN_GAIN` although K subjects
+    cannot show that one more stays off (with K = 8, 0 of 8 is compatible
+    with one subject in four fitting it, at 90% confidence).  Its spread is
+    then `borrowed_spread`, the group's typical one (`borrowed_spread`:
+    the median of the candidates' null variances, square-rooted)."""
+    g = np.asarray([x for x in null if x is not None], float)
+    if len(g) < 2 or not np.all(np.isfinite(g)):
+        raise DiagnosisError(f"{name}: the reference group's null needs at least 2 finite "
+                             f"gains, got {list(null)}")
+    if n_candidates < 1 or not 0 < alpha < 1:
+        raise ValueError(f"n_candidates >= 1 and 0 < alpha < 1 needed, got {n_candidates}, "
+                         f"{alpha}")
+    k = len(g)
+    spread = g.std(ddof=1)
+    if borrowed_spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
+        spread = max(spread, float(borrowed_spread))
+    bound = g.mean() + student_t.ppf(1 - alpha / n_candidates, k - 1) * spread * \
+        math.sqrt(1 + 1 / k)
+    return float(max(MIN_GAIN, bound))
+
+
+def group_null_spread(nulls: dict) -> float | None:
+    """The spread of a typical candidate's null gains on the group: the
+    square root of the median, over the candidates, of their null gains'
+    variance (None without any candidate of 2 finite gains).  What a
+    degenerate null borrows (`null_threshold`)."""
+    var = []
+    for gains in nulls.values():
+        g = np.asarray([x for x in gains if x is not None], float)
+        if len(g) >= 2 and np.all(np.isfinite(g)):
+            var.append(g.var(ddof=1))
+    return float(math.sqrt(np.median(var))) if var else None
