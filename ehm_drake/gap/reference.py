@@ -230,11 +230,6 @@ class _Scorer:
             chi[where] = np.abs(x - A_all @ u)[where] ** 2
             return chi, float(u @ u)
 
-        def residual_vec(x, train):
-            u = profile_nuisance(x, A_all, train)
-            e = (x - A_all @ u)[train]
-            return np.concatenate([e.real, e.imag, u])
-
         every = np.ones(len(r), bool)
         x0 = r * sw
         chi0_all, p0 = rows_chi(x0, every, every)
@@ -243,14 +238,18 @@ class _Scorer:
             chi0_held[m] = rows_chi(x0, ~m, m)[0][m]
         out = {"none": {"chi_all": chi0_all, "chi_heldout": chi0_held, "coords": [],
                         "cost": float(np.sum(chi0_all) + p0), "level_gain": 0.0}}
-        level = (_LevelDesign(r, group, *self.level_pairs) if len(self.level_pairs[0])
+        # (Only where a candidate scored here depends on the level: a subject
+        # job scores one candidate.)
+        level = (_LevelDesign(r, group, *self.level_pairs)
+                 if len(self.level_pairs[0]) and any(
+                     Candidate(tuple(n.split("+"))).level_dependent for n in names)
                  else None)
         for name in names:
             cand = Candidate(tuple(name.split("+")))
             sig, refresh, lo, hi = self.signature_fn(cand)
 
             def res(c, train, sig=sig):
-                return residual_vec((r - sig(c)) * sw, train)
+                return scatter_residual((r - sig(c)) * sw, A_all, train)
 
             def start_cost(c, refresh=refresh, res=res):
                 refresh(c)
@@ -325,10 +324,7 @@ class _LevelDesign:
         return wrap_log(v[..., self.hi] - v[..., self.lo])
 
     def residual(self, d: np.ndarray) -> np.ndarray:
-        x = d * self.sw
-        u = profile_nuisance(x, self.A, self.every)
-        e = x - self.A @ u
-        return np.concatenate([e.real, e.imag, u])
+        return scatter_residual(d * self.sw, self.A, self.every)
 
     def cost(self, d: np.ndarray) -> float:
         return float(np.sum(self.residual(d) ** 2))
@@ -371,6 +367,16 @@ def _descend(fun, x0, lo, hi, max_nfev: int) -> np.ndarray:
                       bounds=(np.ones_like(lo), np.full_like(lo, 2.0)), diff_step=1e-3,
                       max_nfev=max_nfev, x_scale="jac").x
     return np.clip(lo + (z - 1.0) * width, lo, hi)
+
+
+def scatter_residual(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
+    """The least-squares residual whose squared norm is x's chi^2 on the
+    rows `train` under the covariance I + A A^T: the rows' part of x less
+    the profiled scatter A u (real, then imaginary parts), then u
+    (`profile_nuisance`)."""
+    u = profile_nuisance(x, A, train)
+    e = (x - A @ u)[train]
+    return np.concatenate([e.real, e.imag, u])
 
 
 def profile_nuisance(x: np.ndarray, A: np.ndarray, train) -> np.ndarray:
