@@ -22,7 +22,7 @@ from ehm_drake.realities.spine5 import params as P
 from ehm_drake.realities.spine5.body import G, build_body
 from ehm_drake.realities.spine5.check import apparent_mass, peak, transmissibility
 from ehm_drake.realities.spine5.effects import EFFECT_NAMES
-from ehm_drake.realities.spine5.model import Spine5Model
+from ehm_drake.realities.spine5.model import ARM_DAMPING_PER_STIFFNESS_S, Spine5Model
 from ehm_drake.signals import make_seat_signal
 
 pytestmark = pytest.mark.xdist_group("spine5")
@@ -278,6 +278,26 @@ def test_blow_up_is_reported_with_time_and_joint(reality):
     sig = make_seat_signal("random", "z", 0.3, 3.0, 1, H, 0.1, 0.2)
     with pytest.raises(RealityError, match=r"diverged at t = 0\.\d+ s: joint C[07]/"):
         reality.run_test(prepared, sig)
+
+
+def test_arms_subject_that_diverged_stays_stable(reality):
+    """Blind run seed 2036's trial 0 (subject 1462741397, arms at strength
+    0.61): with the arm joints damped at 0.4 N m s/rad whatever their
+    stiffness, its delayed shoulder reflex loop grew a ~5 Hz abduction mode
+    and the fore-aft test diverged at 2.6-2.9 s (shoulder 57-58 deg).  With
+    the damping following the joint's stiffness it holds the arms, and the
+    arm joints' damping is that rule's."""
+    values = reality.effect_values("arms", 0.6093)
+    prepared = reality.prepare(reality.subject(1462741397), {"arms": values})
+    sig = make_seat_signal("random", "x", 0.3, 4.0, 1, H, 0.0, 1.0)
+    run = reality.simulate(prepared, sig)
+    head = run.record.channels["head_pitch"]
+    assert np.all(np.isfinite(head)) and np.max(np.abs(head)) < 5.0  # deg
+    model = Spine5Model(prepared.values, prepared.effects)
+    for joint, group in (("upper_arm_l_x", "shoulder"), ("forearm_r_y", "elbow")):
+        g = model._arm_gains(group)
+        assert model.plant.GetJointByName(joint).default_damping() == pytest.approx(
+            ARM_DAMPING_PER_STIFFNESS_S * (g["k_par"] + g["ki"] + g["kp"]))
 
 
 def test_signal_at_another_time_step_is_refused(reality, nominal):

@@ -35,7 +35,8 @@ base body exactly (the structural effects add no body at s = 0: their
   the trunk sways).
 * arms -- upper arm and forearm-hand per side on a 3-DoF shoulder and a
   revolute elbow (muscle torque generators with intrinsic stiffness half the
-  reflex stiffness, passive SLS, damping), the palm resting on the
+  reflex stiffness, passive SLS, joint damping 0.05 s x the joint's static
+  stiffness: `Spine5Model._arm_gains`), the palm resting on the
   thigh through a soft-tissue 3D spring-damper preloaded with its share of
   the forearm weight; shoulder reflex stiffness 300 -> 12 N m/rad (arms held
   firm -> relaxed; elbow half of it) and palm-thigh stiffness 300 ->

@@ -87,6 +87,11 @@ MARKER_SEGMENTS = ("pelvis", "trunk", "head", "knee_l", "knee_r")
 POSE_BODIES = ("pelvis", "lower_thorax", "head", "thigh_l", "thigh_r")
 
 
+#: Arm joint damping per unit of the joint's static stiffness, s (see
+#: `Spine5Model._arm_gains`).
+ARM_DAMPING_PER_STIFFNESS_S = 0.05
+
+
 class Spine5Diverged(RuntimeError):
     """The simulation left the physical range (time, body, quantity)."""
 
@@ -130,6 +135,31 @@ class Spine5Model:
         self._build_plant()
         self._build_dofs()
 
+    def _arm_gains(self, group: str) -> dict[str, float]:
+        """Joint gains of a shoulder or elbow DoF (`arms` effect): reflex
+        stiffness kp from the effect (the elbow half the shoulder's),
+        intrinsic stiffness ki half of it, reflex rate gain kd 0.08 kp;
+        passive capsule k_par 5 (3) N m/rad; T_max 60 (50) N m (TMAX).
+
+        Joint damping b proportional to the joint's static stiffness,
+        b = 0.05 s x (k_par + ki + kp): muscle viscosity rises with the
+        stiffness (Dolan et al. 1993, IEEE SMC 23:698: joint damping follows
+        joint stiffness and inertia; two-joint arm models take B = 0.05 K,
+        e.g. PMC2784227 Table 1).  At the relaxed end (kp 12) b is 1.2 N m s/rad
+        at the shoulder, at the firm end (kp 300) 23.  With a fixed 0.4 N m
+        s/rad the delayed reflex loop (kd and kp through the 30 ms delay and
+        the activation) was unstable on many subjects: a ~5 Hz shoulder
+        abduction-rotation mode grew at ~4/s from rest (5 of the 8 arms
+        trials of the blind runs with seeds 2034-2036 diverged)."""
+        kp_s = self.effects["arms"]["shoulder_kp"]
+        if group == "shoulder":
+            k_par, kp, tmax = 5.0, kp_s, 60.0
+        else:
+            k_par, kp, tmax = 3.0, 0.5 * kp_s, 50.0
+        ki = 0.5 * kp
+        return {"k_par": k_par, "kp": kp, "ki": ki, "kd": 0.08 * kp, "tmax": tmax,
+                "b": ARM_DAMPING_PER_STIFFNESS_S * (k_par + ki + kp)}
+
     # ------------------------------------------------------------------ plant
     def _build_plant(self):
         plant = MultibodyPlant(self.h)
@@ -143,9 +173,10 @@ class Spine5Model:
         v = self.v
 
         def damping(group):
+            if group in ("shoulder", "elbow"):
+                return self._arm_gains(group)["b"]
             return {"lumbar": v["b_lumbar"], "thoracic": v["b_thoracic"], "neck": v["b_neck"],
-                    "hip": v["b_hip"], "knee": v["b_knee"], "ankle": v["b_ankle"],
-                    "shoulder": 0.4, "elbow": 0.2}[group]
+                    "hip": v["b_hip"], "knee": v["b_knee"], "ankle": v["b_ankle"]}[group]
 
         for name, seg in segs.items():
             child = self.rb[name]
@@ -235,7 +266,6 @@ class Spine5Model:
         kpar, kmx, tau, ki, kp, kd, tmax = [], [], [], [], [], [], []
         ratio = {"y": 1.0, "x": v["axis_lateral"], "z": v["axis_axial"]}
         tscale = {"y": 1.0, "x": 0.8, "z": 0.5}
-        arms = self.effects.get("arms", {})
         for body, js in self.joints.items():
             if body in ("pelvis", "viscera", "cushion"):
                 continue
@@ -248,17 +278,14 @@ class Spine5Model:
                 iv.append(j.velocity_start())
                 group.append(g)
                 if g in ("shoulder", "elbow"):
-                    # Arms effect: reflex stiffness from the effect (elbow half
-                    # the shoulder's), intrinsic half of it; passive capsule
-                    # 5 (3) N m/rad; T_max 60 (50) N m (TMAX).
-                    kp_s = arms["shoulder_kp"] * (1.0 if g == "shoulder" else 0.5)
-                    kpar.append(5.0 if g == "shoulder" else 3.0)
-                    kmx.append(5.0 if g == "shoulder" else 3.0)
+                    a = self._arm_gains(g)
+                    kpar.append(a["k_par"])
+                    kmx.append(a["k_par"])
                     tau.append(v["tau_limb"])
-                    ki.append(0.5 * kp_s)
-                    kp.append(kp_s)
-                    kd.append(0.08 * kp_s)
-                    tmax.append(60.0 if g == "shoulder" else 50.0)
+                    ki.append(a["ki"])
+                    kp.append(a["kp"])
+                    kd.append(a["kd"])
+                    tmax.append(a["tmax"])
                     continue
                 r = ratio[letter] if js[0][1] == "y" and len(js) == 3 else 1.0
                 k0 = v[f"k_{g}"] * r
