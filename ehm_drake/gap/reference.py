@@ -238,14 +238,13 @@ class _Scorer:
             chi0_held[m] = rows_chi(x0, ~m, m)[0][m]
         out = {"none": {"chi_all": chi0_all, "chi_heldout": chi0_held, "coords": [],
                         "cost": float(np.sum(chi0_all) + p0), "level_gain": 0.0}}
+        cands = {name: Candidate(tuple(name.split("+"))) for name in names}
         # (Only where a candidate scored here depends on the level: a subject
         # job scores one candidate.)
         level = (_LevelDesign(r, group, *self.level_pairs)
-                 if len(self.level_pairs[0]) and any(
-                     Candidate(tuple(n.split("+"))).level_dependent for n in names)
+                 if len(self.level_pairs[0]) and any(c.level_dependent for c in cands.values())
                  else None)
-        for name in names:
-            cand = Candidate(tuple(name.split("+")))
+        for name, cand in cands.items():
             sig, refresh, lo, hi = self.signature_fn(cand)
 
             def res(c, train, sig=sig):
