@@ -397,7 +397,7 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
     assert rep["best_effect"] is None
     for e in rep["ranking"]:
         assert len(e["null_gains"]) == 4 and e["null_threshold"] >= 16.3
-        assert e["beyond_null"] == (e["heldout_gain"] > e["null_threshold"])
+        assert e["beyond_null"] == (e["evidence"] > e["null_threshold"])
     assert "Reference group" in (none / "diagnosis" / "report.md").read_text()
     assert "reference group of 4" in (out / "blind.md").read_text()
 
@@ -569,6 +569,58 @@ def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_eff
     single = _stub_scorer(one, lambda c: float(c[0]) * 0.3 * shape[:len(one.rows.freq)], 4.0)
     res = single.score(structure[:len(one.rows.freq)], one, [name])
     assert res[name]["level_gain"] == 0.0
+
+
+def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_its_evidence():
+    """A subject differs from the group by a resonance change that is the
+    same at both levels.  A candidate whose change grows with the level fits
+    it on all rows (a compromise strength) and gains held out, but that fit
+    predicts level differences the subject does not show: for an
+    amplitude-driven effect (co-contraction) that loss is taken off the
+    evidence, down to zero; for a separation (level-dependent, not
+    amplitude-driven) it is reported and not used.  On a subject with the
+    effect itself the all-rows fit gains on the level differences too, and
+    the evidence is the held-out plus the level gain."""
+    from ehm_drake.gap.reference import _evidence, _gain
+
+    rng = np.random.default_rng(11)
+    labs = []
+    for k in range(8):
+        a, b = rng.normal(0, 0.2), rng.normal(0, 0.3)
+        e = rng.normal(0, 0.03, 2)
+
+        def H(f, lv, ch, a=a, b=b, e=e):
+            return (1 + f / 5) * np.exp(a + 1j * b + lv * (e[0] + 1j * e[1]) * f / 12)
+        labs.append(_lab(H, name=f"s{k}"))
+    g = ReferenceGroup.from_labs(labs)
+    f, lv = g.rows.freq, g.rows.level
+    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
+
+    def sig_of(c):
+        return float(c[0]) * lv * shape
+
+    scorer = _stub_scorer(g, sig_of, 10.0)
+    names = ["cocontraction", "backrest_separation"]
+    mimic = scorer.score(4.0 * shape, g, names)  # the same at 0.3 and 0.6 m/s^2
+    true = scorer.score(sig_of([1.5]), g, names)
+    for n in names:
+        m = mimic[n]
+        plain = _gain(m, mimic["none"]) + m["level_gain"]
+        assert plain > 50  # the fit to all rows gains held out ...
+        assert m["level_gain_at_fit"] < -plain  # ... and contradicts the level differences
+        t = true[n]
+        assert t["level_gain_at_fit"] > 50
+        assert _evidence(t, true["none"]) == pytest.approx(_gain(t, true["none"]) + t["level_gain"])
+    assert mimic["cocontraction"]["amplitude_driven"]
+    assert _evidence(mimic["cocontraction"], mimic["none"]) == 0.0
+    sep = mimic["backrest_separation"]
+    assert not sep["amplitude_driven"]
+    assert _evidence(sep, mimic["none"]) == pytest.approx(_gain(sep, mimic["none"])
+                                                          + sep["level_gain"])
+    # A negative evidence is kept as it is (no effect is not made worse).
+    neg = {**mimic["cocontraction"], "level_gain": -5.0 - _gain(mimic["cocontraction"],
+                                                                 mimic["none"])}
+    assert _evidence(neg, mimic["none"]) == pytest.approx(-5.0)
 
 
 def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():

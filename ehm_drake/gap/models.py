@@ -206,6 +206,17 @@ class TestInput:
         return cls(direction, level, grid, psd, "timeseries")
 
 
+#: The level-dependent effects whose equivalent-linear change vanishes with
+#: the response's amplitude: the foam's cubic force adds 3 k gamma s^2 (s
+#: the compression's standard deviation), the friction's Jenkins slider
+#: sticks below mu N0, co-contraction adds c a_rms kp.  Each of them changes
+#: the response only as far as the level does, so all of its signature on
+#: a subject comes with level differences (`reference._evidence` holds it
+#: to them).  A backrest separation is level-dependent but not amplitude
+#: driven: a pad beyond reach is gone at any amplitude.
+AMPLITUDE_DRIVEN = ("seat_foam_stiffening", "seat_friction", "cocontraction")
+
+
 @dataclass
 class Candidate:
     """A candidate explanation: no effect ("none") or one or more effects."""
@@ -230,6 +241,11 @@ class Candidate:
     @property
     def level_dependent(self) -> bool:
         return any(EFFECTS[e].kind == "level" for e in self.effects)
+
+    @property
+    def amplitude_driven(self) -> bool:
+        """Every effect of the candidate is `AMPLITUDE_DRIVEN`."""
+        return bool(self.effects) and all(e in AMPLITUDE_DRIVEN for e in self.effects)
 
     def values(self, coords) -> dict:
         """{effect: {param: value}} (with the fixed values) at `coords`."""

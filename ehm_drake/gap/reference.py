@@ -279,6 +279,8 @@ class _Scorer:
                 x = _descend(lambda c, res=res: res(c, every), x, lo, hi, nfev)
             refresh(x)
             s_all = sig(x)
+            level_at_fit = (level.gain_of(s_all) if level is not None and cand.level_dependent
+                            else 0.0)
             chi_all, p = rows_chi((r - s_all) * sw, every, every)
             chi_held = np.full(len(r), np.nan)
             for m in self.test_masks:
@@ -287,7 +289,9 @@ class _Scorer:
                 chi_held[m] = rows_chi((r - sig(x2)) * sw, ~m, m)[0][m]
             out[name] = {"chi_all": chi_all, "chi_heldout": chi_held,
                          "coords": x.tolist(), "cost": float(np.sum(chi_all) + p),
-                         "signature": s_all, "level_gain": 0.0, "level_coords": None}
+                         "signature": s_all, "level_gain": 0.0, "level_coords": None,
+                         "level_gain_at_fit": level_at_fit,
+                         "amplitude_driven": cand.amplitude_driven}
             if level is not None and cand.level_dependent:
                 out[name].update(level.fit(sig, refresh, lo, hi, [*starts, x]))
         return out
@@ -327,6 +331,13 @@ class _LevelDesign:
 
     def cost(self, d: np.ndarray) -> float:
         return float(np.sum(self.residual(d) ** 2))
+
+    def gain_of(self, s: np.ndarray) -> float:
+        """The chi^2 gain over none on the level differences of the
+        signature s (log H less the anchor's, on all rows) as it is, not
+        refitted: negative when s predicts level differences the subject
+        does not show."""
+        return self.cost0 - self.cost(self.dr - self.delta(s))
 
     def fit(self, sig, refresh, lo, hi, starts) -> dict:
         """The candidate fitted to the subject's level differences from the
@@ -397,8 +408,24 @@ def _evidence(res: dict, base: dict) -> float:
     """A candidate's evidence: its held-out chi^2 gain on all rows plus its
     gain on the level differences (`_LevelDesign`; 0 for a candidate that
     does not depend on the level).  Thresholded by the same sum on the
-    group's own subjects, so the two parts need no common scale."""
-    return _gain(res, base) + float(res.get("level_gain", 0.0))
+    group's own subjects, so the two parts need no common scale.
+
+    An amplitude-driven candidate (`models.AMPLITUDE_DRIVEN`: foam, friction,
+    co-contraction) changes the response only as far as the level does, so
+    its fit to all rows predicts level differences.  Where the subject does
+    not show them (the level differences' chi^2 rises at that fit:
+    ``level_gain_at_fit`` < 0), the candidate is mimicking a difference that
+    does not depend on the level, and that loss is taken off its evidence,
+    down to zero (a contradiction removes evidence; it is no evidence of
+    the effect's absence).  On `spine5`'s seed 2037 friction's all-rows fits
+    lose 2,800-4,400 there on the trials it was wrongly named on (arms,
+    co-contraction, a reflex delay, separations) and gain 3,400-3,600 on
+    true friction trials."""
+    e = _gain(res, base) + float(res.get("level_gain", 0.0))
+    loss = float(res.get("level_gain_at_fit", 0.0))
+    if res.get("amplitude_driven") and loss < 0:
+        e = max(e + loss, min(e, 0.0))
+    return e
 
 
 # ---------------------------------------------------------------------------
@@ -587,6 +614,8 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "delta_bic": float(-gain + k * math.log(2 * n_rows)),
             "gap_train": g_t, "gap_heldout": g_h,
             "heldout_gain": gain, "level_gain": float(r.get("level_gain", 0.0)),
+            "level_gain_at_fit": float(r.get("level_gain_at_fit", 0.0)),
+            "amplitude_driven": cand.amplitude_driven,
             "level_params": (None if r.get("level_coords") is None else
                              {e: {p: float(v) for p, v in vals.items()} for e, vals in
                               cand.values(np.array(r["level_coords"])).items()}),
