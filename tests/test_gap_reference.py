@@ -522,6 +522,21 @@ def test_level_pairs_match_each_higher_level_with_the_lowest_of_its_direction():
     assert len(level_pairs(unknown.rows)[0]) == 0
 
 
+def _level_group_labs(K=8, seed=11):
+    """K subjects on z at 0.3 and 0.6 m/s^2 that differ by a gain and phase
+    shift and a small subject-specific level dependence."""
+    rng = np.random.default_rng(seed)
+    labs = []
+    for k in range(K):
+        a, b = rng.normal(0, 0.2), rng.normal(0, 0.3)
+        e = rng.normal(0, 0.03, 2)
+
+        def H(f, lv, ch, a=a, b=b, e=e):
+            return (1 + f / 5) * np.exp(a + 1j * b + lv * (e[0] + 1j * e[1]) * f / 12)
+        labs.append(_lab(H, name=f"s{k}"))
+    return labs
+
+
 def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_effect():
     """A subject far outside the group's scatter by a structural difference
     that is the same at both levels (a resonance the group does not have),
@@ -532,15 +547,7 @@ def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_eff
     A candidate that does not depend on the level has no level fit."""
     from ehm_drake.gap.reference import _evidence, _gain
 
-    rng = np.random.default_rng(11)
-    labs = []
-    for k in range(8):
-        a, b = rng.normal(0, 0.2), rng.normal(0, 0.3)
-        e = rng.normal(0, 0.03, 2)
-
-        def H(f, lv, ch, a=a, b=b, e=e):  # small subject-specific level dependence
-            return (1 + f / 5) * np.exp(a + 1j * b + lv * (e[0] + 1j * e[1]) * f / 12)
-        labs.append(_lab(H, name=f"s{k}"))
+    labs = _level_group_labs()
     g = ReferenceGroup.from_labs(labs)
     f, lv = g.rows.freq, g.rows.level
     shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
@@ -583,16 +590,7 @@ def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_i
     the evidence is the held-out plus the level gain."""
     from ehm_drake.gap.reference import _evidence, _gain
 
-    rng = np.random.default_rng(11)
-    labs = []
-    for k in range(8):
-        a, b = rng.normal(0, 0.2), rng.normal(0, 0.3)
-        e = rng.normal(0, 0.03, 2)
-
-        def H(f, lv, ch, a=a, b=b, e=e):
-            return (1 + f / 5) * np.exp(a + 1j * b + lv * (e[0] + 1j * e[1]) * f / 12)
-        labs.append(_lab(H, name=f"s{k}"))
-    g = ReferenceGroup.from_labs(labs)
+    g = ReferenceGroup.from_labs(_level_group_labs())
     f, lv = g.rows.freq, g.rows.level
     shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
 
