@@ -418,9 +418,10 @@ def _evidence(res: dict, base: dict) -> float:
     does not depend on the level, and that loss is taken off its evidence,
     down to zero (a contradiction removes evidence; it is no evidence of
     the effect's absence).  On `spine5`'s seed 2037 friction's all-rows fits
-    lose 2,800-4,400 there on the trials it was wrongly named on (arms,
-    co-contraction, a reflex delay, separations) and gain 3,400-3,600 on
-    true friction trials."""
+    lose 2,765-4,416 there on the 5 trials it was wrongly named on (arms,
+    co-contraction, a reflex delay, separations) and gain 3,358-11,170 on
+    the true friction trials; a separation's fit loses 70,000 on true
+    separations (`models.AMPLITUDE_DRIVEN` leaves it out)."""
     e = _gain(res, base) + float(res.get("level_gain", 0.0))
     loss = float(res.get("level_gain_at_fit", 0.0))
     if res.get("amplitude_driven") and loss < 0:
