@@ -410,18 +410,14 @@ def _evidence(res: dict, base: dict) -> float:
     does not depend on the level).  Thresholded by the same sum on the
     group's own subjects, so the two parts need no common scale.
 
-    An amplitude-driven candidate (`models.AMPLITUDE_DRIVEN`: foam, friction,
-    co-contraction) changes the response only as far as the level does, so
-    its fit to all rows predicts level differences.  Where the subject does
-    not show them (the level differences' chi^2 rises at that fit:
-    ``level_gain_at_fit`` < 0), the candidate is mimicking a difference that
-    does not depend on the level, and that loss is taken off its evidence,
-    down to zero (a contradiction removes evidence; it is no evidence of
-    the effect's absence).  On `spine5`'s seed 2037 friction's all-rows fits
-    lose 2,765-4,416 there on the 5 trials it was wrongly named on (arms,
-    co-contraction, a reflex delay, separations) and gain 3,358-11,170 on
-    the true friction trials; a separation's fit loses 70,000 on true
-    separations (`models.AMPLITUDE_DRIVEN` leaves it out)."""
+    An amplitude-driven candidate (`models.AMPLITUDE_DRIVEN`) changes the
+    response only as far as the level does, so its fit to all rows predicts
+    level differences.  Where the subject does not show them
+    (``level_gain_at_fit`` < 0) it mimics a level-independent difference,
+    and that loss is taken off its evidence, down to zero.  On `spine5`'s
+    seed 2037 friction's all-rows fits lose 2,765-4,416 there on the 5
+    trials it was wrongly named on and gain 3,358-11,170 on true friction;
+    a separation's fit loses 70,000 on true separations (left out)."""
     e = _gain(res, base) + float(res.get("level_gain", 0.0))
     loss = float(res.get("level_gain_at_fit", 0.0))
     if res.get("amplitude_driven") and loss < 0:
