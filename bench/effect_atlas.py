@@ -1,0 +1,151 @@
+"""Where each hidden effect acts on an independent reality, and how much of it
+the EHM's candidate of the same name can represent.
+
+For a finished blind run with a reference group (`ehm-drake blind --reality
+NAME --references K`), each single-effect trial has its data and its twin
+(the same subject without the effect).  The reality's effect signature is
+their difference, s_r = log H(trial) - log H(twin) on the group's rows; the
+EHM candidate's signature s_c is its change of log H at the group's anchor
+(`gap.reference._Scorer`) at a strength on its plausible path or at the far
+end of its bounds.  Both are whitened by the group's scatter per row (w =
+1 / sd), so |w s|^2 is the chi^2 of the effect alone against the group.
+
+Per effect the table gives: the reality's chi^2 and its shares per
+excitation direction and in its largest channels; the candidate's, at
+strength 0.7; and the share of the reality's effect that lies along the
+candidate's signature, max over the strength path and the far end of the
+bounds of cos^2 = (Re <w s_r, w s_c>)^2 / (|w s_r|^2 |w s_c|^2), averaged over the
+trials (1: the candidate can reproduce the effect's shape up to its size; 0:
+it acts elsewhere).  A linear measure: it ignores the base refit and the
+nuisance directions the diagnosis also fits.
+
+    python bench/effect_atlas.py /work/runs/spine5_s2038 [--out atlas.json]
+
+Families and the anchor come from the diagnosis' caches (the run's
+diagnoses made them); without them they are built (minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from ehm_drake.gap.anchor import fit_anchor
+from ehm_drake.gap.diagnose import (
+    candidate_names,
+    load_families,
+    load_lab_data,
+    separation_slope,
+)
+from ehm_drake.gap.group import load_reference, wrap_log
+from ehm_drake.gap.models import STRENGTH_PATH, Candidate
+from ehm_drake.gap.reference import _Scorer
+from ehm_drake.identification.parameters import resolve_free
+from ehm_drake.model.anthropometry import REFERENCE
+from ehm_drake.params import load_params
+
+SHOWN_STRENGTH = 0.7
+
+
+def shares(chi: np.ndarray, directions: np.ndarray, channels: np.ndarray, top: int = 4):
+    """(total chi^2, {direction: share}, [(direction:channel, share)] largest first)."""
+    total = float(chi.sum())
+    if not total > 0:
+        return 0.0, {}, []
+    by_dir = {d: float(chi[directions == d].sum() / total) for d in sorted(set(directions))}
+    by_ch = defaultdict(float)
+    for d, c, v in zip(directions, channels, chi, strict=True):
+        by_ch[f"{d}:{c}"] += float(v)
+    largest = sorted(by_ch.items(), key=lambda kv: -kv[1])[:top]
+    return total, by_dir, [(k, v / total) for k, v in largest]
+
+
+def cos2(a: np.ndarray, b: np.ndarray) -> float:
+    """Share of whitened complex signature a along b (real inner product)."""
+    na, nb = float(np.sum(np.abs(a) ** 2)), float(np.sum(np.abs(b) ** 2))
+    if not (na > 0 and nb > 0):
+        return 0.0
+    return float(np.sum((np.conj(a) * b).real)) ** 2 / (na * nb)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--out", type=Path)
+    ap.add_argument("--workers", type=int, default=2)
+    args = ap.parse_args()
+
+    group = load_reference([args.run / "reference"])
+    rows = group.rows
+    w = 1.0 / np.sqrt(np.maximum(group.variance, 1e-12))
+    directions = np.asarray(rows.direction).astype(str)
+    channels = np.array([f"{s}_{d}" for s, d in zip(rows.segment, rows.dof, strict=True)])
+
+    # The reality's effects, from the single-effect trials and their twins.
+    truth = defaultdict(list)
+    for tdir in sorted(args.run.glob("trial_*")):
+        rfile = tdir / "result.json"
+        if not rfile.is_file() or not (tdir / "twin_data" / "frf.csv").is_file():
+            continue
+        res = json.loads(rfile.read_text())
+        if "skipped" in res or len(res["hidden"]) != 1:
+            continue
+        a, b = load_lab_data(tdir / "data"), load_lab_data(tdir / "twin_data")
+        s = wrap_log(np.log(a.rows.H[group.align(a)]) - np.log(b.rows.H[group.align(b)]))
+        truth[next(iter(res["hidden"]))].append(s * w)
+
+    # The EHM candidates at the group's anchor (cached by the run's diagnoses).
+    params = load_params()
+    names = [n for n in candidate_names(None) if n in truth]
+    base_names = [f.name for f in resolve_free("default")]
+    anchor = fit_anchor(group, params, REFERENCE, workers=args.workers, progress=None,
+                        use_cache=True)
+    families = load_families(anchor["params"], REFERENCE, names, base_names, args.workers,
+                             None, True)
+    scorer = _Scorer(group, families, separation_slope(anchor["params"], REFERENCE),
+                     base_names)
+
+    table = {}
+    print(f"{args.run.name}: effect, trials; the reality's chi^2 and shares x/y/z; the EHM "
+          f"candidate's at strength {SHOWN_STRENGTH}; the reality's effect along the "
+          "candidate (mean cos^2, best strength)")
+    for name in names:
+        cand = Candidate(tuple(name.split("+")))
+        sig, refresh, lo, hi = scorer.signature_fn(cand)
+        sigs = {}
+        # The strength path, and the far end of the bounds (where a
+        # separation's pads leave: on the path they stay in contact).
+        starts = {s: np.clip(cand.start_grid((s,))[0], lo, hi)
+                  for s in sorted({*STRENGTH_PATH, SHOWN_STRENGTH})}
+        off = cand.start_grid((0.0,))[0]
+        starts["far"] = np.where(cand.start_grid((1.0,))[0] >= off, hi, lo)
+        for key, c in starts.items():
+            refresh(c)
+            sigs[key] = sig(c) * w
+        r_chi = np.mean([np.abs(s) ** 2 for s in truth[name]], axis=0)
+        r_tot, r_dir, r_top = shares(r_chi, directions, channels)
+        c_tot, c_dir, c_top = shares(np.abs(sigs[SHOWN_STRENGTH]) ** 2, directions, channels)
+        along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
+        table[name] = {"trials": len(truth[name]),
+                       "reality": {"chi2": r_tot, "directions": r_dir, "channels": r_top},
+                       "candidate": {"strength": SHOWN_STRENGTH, "chi2": c_tot,
+                                     "directions": c_dir, "channels": c_top},
+                       "along_candidate": along}
+
+        def fmt(d):
+            return "/".join(f"{100 * d.get(k, 0.0):.0f}" for k in "xyz")
+        def top2(t):
+            return ", ".join(f"{k} {100 * v:.0f}%" for k, v in t[:2])
+        print(f"  {name:22s} {len(truth[name])}  reality {r_tot:8.0f} ({fmt(r_dir)}; "
+              f"{top2(r_top)})  candidate {c_tot:8.0f} ({fmt(c_dir)}; {top2(c_top)})  "
+              f"along {along:.2f}")
+    if args.out:
+        args.out.write_text(json.dumps(table, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
