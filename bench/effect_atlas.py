@@ -36,6 +36,7 @@ import numpy as np
 
 from ehm_drake.gap.anchor import fit_anchor
 from ehm_drake.gap.diagnose import (
+    DiagnosisError,
     candidate_names,
     load_families,
     load_lab_data,
@@ -72,14 +73,28 @@ def cos2(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sum((np.conj(a) * b).real)) ** 2 / (na * nb)
 
 
+def _xyz(by_dir: dict) -> str:
+    return "/".join(f"{100 * by_dir.get(k, 0.0):.0f}" for k in "xyz")
+
+
+def _top2(largest: list) -> str:
+    return ", ".join(f"{k} {100 * v:.0f}%" for k, v in largest[:2])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
+    if not (args.run / "reference").is_dir():
+        raise SystemExit(f"{args.run}: no reference group (reference/); the atlas needs a "
+                         "finished `ehm-drake blind --reality NAME --references K` run")
 
-    group = load_reference([args.run / "reference"])
+    try:
+        group = load_reference([args.run / "reference"])
+    except DiagnosisError as e:
+        raise SystemExit(str(e)) from None
     rows = group.rows
     w = 1.0 / np.sqrt(np.maximum(group.variance, 1e-12))
     directions = np.asarray(rows.direction).astype(str)
@@ -97,6 +112,11 @@ def main() -> None:
         a, b = load_lab_data(tdir / "data"), load_lab_data(tdir / "twin_data")
         s = wrap_log(np.log(a.rows.H[group.align(a)]) - np.log(b.rows.H[group.align(b)]))
         truth[next(iter(res["hidden"]))].append(s * w)
+
+    if not truth:
+        raise SystemExit(f"{args.run}: no scored single-effect trial with twin data "
+                         "(trial_*/result.json and trial_*/twin_data/frf.csv); twins are "
+                         "made on independent realities only")
 
     # The EHM candidates at the group's anchor (cached by the run's diagnoses).
     params = load_params()
@@ -118,7 +138,8 @@ def main() -> None:
         sig, refresh, lo, hi = scorer.signature_fn(cand)
         sigs = {}
         # The strength path, and the far end of the bounds (where a
-        # separation's pads leave: on the path they stay in contact).
+        # separation's pads leave: on the path they stay in contact), on the
+        # side the path goes, as `_Scorer.score` takes it.
         starts = {s: np.clip(cand.start_grid((s,))[0], lo, hi)
                   for s in sorted({*STRENGTH_PATH, SHOWN_STRENGTH})}
         off = cand.start_grid((0.0,))[0]
@@ -135,13 +156,8 @@ def main() -> None:
                        "candidate": {"strength": SHOWN_STRENGTH, "chi2": c_tot,
                                      "directions": c_dir, "channels": c_top},
                        "along_candidate": along}
-
-        def fmt(d):
-            return "/".join(f"{100 * d.get(k, 0.0):.0f}" for k in "xyz")
-        def top2(t):
-            return ", ".join(f"{k} {100 * v:.0f}%" for k, v in t[:2])
-        print(f"  {name:22s} {len(truth[name])}  reality {r_tot:8.0f} ({fmt(r_dir)}; "
-              f"{top2(r_top)})  candidate {c_tot:8.0f} ({fmt(c_dir)}; {top2(c_top)})  "
+        print(f"  {name:22s} {len(truth[name])}  reality {r_tot:8.0f} ({_xyz(r_dir)}; "
+              f"{_top2(r_top)})  candidate {c_tot:8.0f} ({_xyz(c_dir)}; {_top2(c_top)})  "
               f"along {along:.2f}")
     if args.out:
         args.out.write_text(json.dumps(table, indent=1) + "\n")
