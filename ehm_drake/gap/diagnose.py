@@ -207,7 +207,7 @@ def scoring_fingerprint() -> str:
     reference-group thresholds from other scoring code are never reused)."""
     here = Path(__file__).resolve().parent
     return _sources_fingerprint(here / n for n in ("models.py", "group.py", "reference.py",
-                                                   "localize.py"))
+                                                   "scatter.py", "localize.py"))
 
 
 def _family_key(params: ModelParams, measures: BodyMeasures, base_names, spec) -> str:
