@@ -17,7 +17,10 @@ candidate's signature, max over the strength path and the far end of the
 bounds of cos^2 = (Re <w s_r, w s_c>)^2 / (|w s_r|^2 |w s_c|^2), averaged over the
 trials (1: the candidate can reproduce the effect's shape up to its size; 0:
 it acts elsewhere).  A linear measure: it ignores the base refit and the
-nuisance directions the diagnosis also fits.
+nuisance directions the diagnosis also fits.  "On gap": the share of each
+chi^2 on rows where the anchor itself differs from the group mean by more
+than a factor of 2 (|log H_anchor - mean log H| > ln 2, gain and phase as
+one complex number), where the model's form is most in doubt.
 
     python bench/effect_atlas.py /work/runs/spine5_s2038 [--out atlas.json]
 
@@ -129,10 +132,15 @@ def main() -> None:
     scorer = _Scorer(group, families, separation_slope(anchor["params"], REFERENCE),
                      base_names)
 
+    # Rows where the anchor misses the group by more than a factor of 2.
+    on_gap = np.abs(wrap_log(scorer.log0 - group.mean_log)) > np.log(2.0)
+    print(f"the anchor differs from the group mean by more than a factor 2 on "
+          f"{100 * on_gap.mean():.0f}% of the rows")
     table = {}
     print(f"{args.run.name}: effect, trials; the reality's chi^2 and shares x/y/z; the EHM "
           f"candidate's at strength {SHOWN_STRENGTH}; the reality's effect along the "
-          "candidate (mean cos^2, best strength)")
+          "candidate (mean cos^2, best strength); the shares of the reality's and the "
+          "candidate's chi^2 on rows where the anchor misses the group by more than 2x")
     for name in names:
         cand = Candidate(tuple(name.split("+")))
         sig, refresh, lo, hi = scorer.signature_fn(cand)
@@ -151,14 +159,18 @@ def main() -> None:
         r_tot, r_dir, r_top = shares(r_chi, directions, channels)
         c_tot, c_dir, c_top = shares(np.abs(sigs[SHOWN_STRENGTH]) ** 2, directions, channels)
         along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
+        c_chi = np.abs(sigs[SHOWN_STRENGTH]) ** 2
+        r_gap = float(r_chi[on_gap].sum() / r_tot) if r_tot > 0 else 0.0
+        c_gap = float(c_chi[on_gap].sum() / c_tot) if c_tot > 0 else 0.0
         table[name] = {"trials": len(truth[name]),
                        "reality": {"chi2": r_tot, "directions": r_dir, "channels": r_top},
                        "candidate": {"strength": SHOWN_STRENGTH, "chi2": c_tot,
                                      "directions": c_dir, "channels": c_top},
-                       "along_candidate": along}
+                       "along_candidate": along,
+                       "on_anchor_gap": {"reality": r_gap, "candidate": c_gap}}
         print(f"  {name:22s} {len(truth[name])}  reality {r_tot:8.0f} ({_xyz(r_dir)}; "
               f"{_top2(r_top)})  candidate {c_tot:8.0f} ({_xyz(c_dir)}; {_top2(c_top)})  "
-              f"along {along:.2f}")
+              f"along {along:.2f}  on gap {100 * r_gap:.0f}%/{100 * c_gap:.0f}%")
     if args.out:
         args.out.write_text(json.dumps(table, indent=1) + "\n")
 
