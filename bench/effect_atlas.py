@@ -157,9 +157,9 @@ def main() -> None:
             sigs[key] = sig(c) * w
         r_chi = np.mean([np.abs(s) ** 2 for s in truth[name]], axis=0)
         r_tot, r_dir, r_top = shares(r_chi, directions, channels)
-        c_tot, c_dir, c_top = shares(np.abs(sigs[SHOWN_STRENGTH]) ** 2, directions, channels)
-        along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
         c_chi = np.abs(sigs[SHOWN_STRENGTH]) ** 2
+        c_tot, c_dir, c_top = shares(c_chi, directions, channels)
+        along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
         r_gap = float(r_chi[on_gap].sum() / r_tot) if r_tot > 0 else 0.0
         # (None: no signature at that strength, e.g. a separation whose pads
         # stay in contact, a level-dependent friction at the anchor.)
