@@ -108,6 +108,22 @@ def test_every_module_imports_alone():
     assert bad == []
 
 
+def test_xdist_groups_keep_their_tests_on_one_worker(request):
+    """The modules with expensive module fixtures (blind runs, fits) mark
+    themselves `xdist_group` so that the fixture is built once.  pytest-xdist
+    tags a grouped test by editing its node id; where the installed pytest
+    ignores that edit (9.2 with xdist 3.8), the groups are spread over the
+    workers and each fixture is built again (CI: +130 s)."""
+    if not (hasattr(request.config, "workerinput")
+            and request.config.getoption("loadgroup", False)):
+        pytest.skip("not running under pytest-xdist --dist loadgroup")
+    grouped = [it for it in request.session.items if it.get_closest_marker("xdist_group")]
+    if not grouped:
+        pytest.skip("no grouped test selected")
+    untagged = [it.nodeid for it in grouped if "@" not in it.nodeid]
+    assert untagged == []
+
+
 # ---------------------------------------------------------------------------
 # Progress
 # ---------------------------------------------------------------------------
