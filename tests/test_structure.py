@@ -125,7 +125,7 @@ def test_every_module_imports_alone():
     """Each module imported first in an interpreter that holds none of the
     package (the order-dependent failures a cycle causes show up only this
     way): forked from a parent that loaded the third-party libraries once
-    (a fresh interpreter per module where there is no fork: 4x slower)."""
+    (a fresh interpreter per module where there is no fork)."""
     names = list(_modules())
     if hasattr(os, "fork"):
         env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
