@@ -6,10 +6,11 @@ already runs threads (a Jupyter kernel, pytest-xdist, Drake's own) can copy
 a held lock into the child, which then waits forever (seen as a hung `fit`).
 Where the platform has it (Linux, macOS) they are forked from a *fork
 server*: a fresh, single-threaded interpreter that imports the package once
-(`PRELOAD`) and forks every worker from there, so a worker starts in
-milliseconds instead of importing Drake, SciPy and the package afresh (~1-2 s
-of CPU per worker with *spawn*, the fallback elsewhere: a short blind run
-starts 16 workers).  Each worker takes the caller's environment as it is
+(`PRELOAD`) and forks every worker from there.  The first pool of a process
+waits for those imports (~2 s); every later pool has its workers running in
+~0.05 s, where spawned workers (*spawn* is the fallback elsewhere) import
+Drake, SciPy and the package afresh, ~1-2 s of CPU each (a short blind run
+starts 16).  Each worker takes the caller's environment as it is
 when the pool is made (as a spawned one would) and ignores Ctrl-C, which the
 parent handles by cancelling what is pending.  Scripts that use these
 functions must guard their entry point (``if __name__ == "__main__":``), as
