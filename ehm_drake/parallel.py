@@ -11,8 +11,9 @@ waits for those imports (~2 s); every later pool has its workers running in
 ~0.05 s, where spawned workers (*spawn* is the fallback elsewhere) import
 Drake, SciPy and the package afresh, ~1-2 s of CPU each (a short blind run
 starts 16).  Each worker takes the caller's environment as it is
-when the pool is made (as a spawned one would) and ignores Ctrl-C, which the
-parent handles by cancelling what is pending.  Scripts that use these
+when the pool is made (as a spawned one would), ignores Ctrl-C, which the
+parent handles by cancelling what is pending, and ends itself within about a
+second once the caller is gone (killed, it could not shut its pool down).  Scripts that use these
 functions must guard their entry point (``if __name__ == "__main__":``), as
 for any spawn-based multiprocessing.
 """
@@ -23,6 +24,8 @@ import concurrent.futures as cf
 import multiprocessing
 import os
 import signal
+import threading
+import time
 
 
 def ignore_sigint(*_args) -> None:
@@ -37,8 +40,35 @@ PRELOAD = ["numpy", "scipy.optimize", "scipy.signal", "ehm_drake.diagram",
            "ehm_drake.gap.synth", "ehm_drake.identification.fit"]
 
 
-def _init(initializer, initargs, environ=None) -> None:
+#: How often a worker checks that the process that made its pool is alive.
+PARENT_CHECK_S = 1.0
+
+
+def _exit_with_parent(pid: int) -> None:
+    """Worker side: end this worker once process `pid` (the caller that
+    made the pool) is gone.  Killed rather than interrupted (a scheduler's
+    time limit, a Jupyter kernel restarted, `kill`), the caller cannot shut
+    its pool down, and a worker of a `ProcessPoolExecutor` never notices on
+    its own: it finishes its job and then waits for the next one forever
+    (checked: after the caller got SIGTERM, both spawned and fork-server
+    workers were still there half an hour later, one still computing)."""
+    def watch():
+        while True:
+            time.sleep(PARENT_CHECK_S)
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # the pid now belongs to another user
+                os._exit(1)
+
+    threading.Thread(target=watch, name="ehm_drake-parent-watch", daemon=True).start()
+
+
+def _init(initializer, initargs, environ=None, parent: int | None = None) -> None:
     ignore_sigint()
+    if parent is not None:
+        _exit_with_parent(parent)
     if environ is not None and environ != dict(os.environ):
         # A fork server's worker has the server's environment (that of the
         # first pool); the caller's may have changed since.
@@ -55,15 +85,16 @@ def worker_count(workers: int | None = None) -> int:
 
 def process_pool(workers: int, initializer=None, initargs=()) -> cf.ProcessPoolExecutor:
     """A pool (fork server, or spawn where there is none) whose workers
-    take the caller's environment, ignore SIGINT and then run
-    `initializer(*initargs)`."""
+    take the caller's environment, ignore SIGINT, end with the caller and
+    then run `initializer(*initargs)`."""
     if "forkserver" in multiprocessing.get_all_start_methods():
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(PRELOAD)
     else:
         ctx = multiprocessing.get_context("spawn")
     return cf.ProcessPoolExecutor(workers, mp_context=ctx, initializer=_init,
-                                  initargs=(initializer, initargs, dict(os.environ)))
+                                  initargs=(initializer, initargs, dict(os.environ),
+                                            os.getpid()))
 
 
 def run_jobs(jobs, workers: int | None = None, progress=None, initializer=None,

@@ -1,6 +1,7 @@
 """Process pools (`ehm_drake.parallel`): results in order, workers that see
-the caller's environment as it is when the pool is made, and (on a platform
-with a fork server) workers that start with the package already imported."""
+the caller's environment as it is when the pool is made, (on a platform
+with a fork server) workers that start with the package already imported,
+and workers that end when their caller is killed."""
 
 from __future__ import annotations
 
@@ -47,3 +48,69 @@ def test_workers_start_with_the_package_imported():
     Drake and the package afresh (1-2 s of CPU each when spawned)."""
     for _, _, modules in run_jobs([(_worker_view, "PATH")] * 2, workers=2):
         assert modules == sorted(PRELOAD)
+
+
+_CALLER = """
+import os, sys, time
+from pathlib import Path
+
+
+def job(folder):
+    (Path(folder) / str(os.getpid())).write_text("")
+    time.sleep(60)
+
+
+if __name__ == "__main__":
+    from ehm_drake import parallel
+
+    if sys.argv[2] == "spawn":
+        parallel.multiprocessing.get_all_start_methods = lambda: ["spawn"]
+    parallel.PRELOAD = ["numpy"]  # (a light fork server: this test is about the workers)
+    parallel.run_jobs([(job, sys.argv[1])] * 2, workers=2)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[-1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc")
+@pytest.mark.parametrize("method", ["forkserver", "spawn"])
+def test_workers_end_when_their_caller_is_killed(tmp_path, method):
+    """A caller killed outright (SIGKILL: a scheduler's limit, a Jupyter
+    kernel restarted) cannot shut its pool down; its workers, each in a
+    60 s job, end within a few seconds anyway instead of computing on and
+    then waiting for work forever."""
+    import signal
+    import subprocess
+    import time
+
+    if method not in multiprocessing.get_all_start_methods():
+        pytest.skip(f"no {method} on this platform")
+    script = tmp_path / "caller.py"
+    script.write_text(_CALLER)
+    pids = tmp_path / "pids"
+    pids.mkdir()
+    caller = subprocess.Popen([sys.executable, str(script), str(pids), method])
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(pids.iterdir())) < 2:
+            assert caller.poll() is None, "the caller ended before its workers started"
+            assert time.monotonic() < deadline, "the workers did not start in 60 s"
+            time.sleep(0.1)
+        workers = [int(p.name) for p in pids.iterdir()]
+        assert all(_alive(p) for p in workers)
+    finally:
+        caller.send_signal(signal.SIGKILL)
+        caller.wait()
+    deadline = time.monotonic() + 10
+    while any(_alive(p) for p in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [p for p in workers if _alive(p)]
+    for p in left:  # (do not leave them behind when the test fails)
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"workers {left} outlived their killed caller"
