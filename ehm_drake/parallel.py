@@ -13,9 +13,9 @@ Drake, SciPy and the package afresh, ~1-2 s of CPU each (a short blind run
 starts 16).  Each worker takes the caller's environment as it is
 when the pool is made (as a spawned one would), ignores Ctrl-C, which the
 parent handles by cancelling what is pending, and ends itself within about a
-second once the caller is gone (killed, it could not shut its pool down).  Scripts that use these
-functions must guard their entry point (``if __name__ == "__main__":``), as
-for any spawn-based multiprocessing.
+second once the caller is gone (killed, it could not shut its pool down).
+Scripts that use these functions must guard their entry point (``if
+__name__ == "__main__":``), as for any spawn-based multiprocessing.
 """
 
 from __future__ import annotations
@@ -52,17 +52,29 @@ def _exit_with_parent(pid: int) -> None:
     its own: it finishes its job and then waits for the next one forever
     (checked: after the caller got SIGTERM, both spawned and fork-server
     workers were still there half an hour later, one still computing)."""
+    if os.name != "posix":  # (os.kill(pid, 0) would terminate it on Windows)
+        return
+
     def watch():
-        while True:
+        while not _gone(pid):
             time.sleep(PARENT_CHECK_S)
-            try:
-                os.kill(pid, 0)
-            except ProcessLookupError:
-                os._exit(1)
-            except PermissionError:  # the pid now belongs to another user
-                os._exit(1)
+        os._exit(1)
 
     threading.Thread(target=watch, name="ehm_drake-parent-watch", daemon=True).start()
+
+
+def _gone(pid: int) -> bool:
+    """Process `pid` has ended: no such process, one of another user (the
+    pid reused), or a zombie (dead, not yet reaped by its own parent)."""
+    try:
+        os.kill(pid, 0)
+    except (ProcessLookupError, PermissionError):
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[-1].split()[0] == "Z"
+    except OSError:  # no /proc (macOS): the signal's answer stands
+        return False
 
 
 def _init(initializer, initargs, environ=None, parent: int | None = None) -> None:

@@ -11,7 +11,7 @@ import sys
 
 import pytest
 
-from ehm_drake.parallel import PRELOAD, run_jobs
+from ehm_drake.parallel import PRELOAD, _gone, run_jobs
 
 
 def _worker_view(name: str) -> tuple:
@@ -71,11 +71,7 @@ if __name__ == "__main__":
 
 
 def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().split(")")[-1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
+    return not _gone(pid)
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc")
@@ -84,7 +80,8 @@ def test_workers_end_when_their_caller_is_killed(tmp_path, method):
     """A caller killed outright (SIGKILL: a scheduler's limit, a Jupyter
     kernel restarted) cannot shut its pool down; its workers, each in a
     60 s job, end within a few seconds anyway instead of computing on and
-    then waiting for work forever."""
+    then waiting for work forever.  The caller stays unreaped meanwhile (a
+    zombie, as under a parent that reaps late): dead all the same."""
     import signal
     import subprocess
     import time
@@ -105,12 +102,13 @@ def test_workers_end_when_their_caller_is_killed(tmp_path, method):
         workers = [int(p.name) for p in pids.iterdir()]
         assert all(_alive(p) for p in workers)
     finally:
+        # Killed and left unreaped for now: a zombie counts as gone.
         caller.send_signal(signal.SIGKILL)
-        caller.wait()
     deadline = time.monotonic() + 10
     while any(_alive(p) for p in workers) and time.monotonic() < deadline:
         time.sleep(0.1)
     left = [p for p in workers if _alive(p)]
+    caller.wait()
     for p in left:  # (do not leave them behind when the test fails)
         os.kill(p, signal.SIGKILL)
     assert not left, f"workers {left} outlived their killed caller"
