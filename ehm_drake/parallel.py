@@ -77,11 +77,10 @@ def _gone(pid: int) -> bool:
         return False
 
 
-def _init(initializer, initargs, environ=None, parent: int | None = None) -> None:
+def _init(initializer, initargs, environ: dict, parent: int) -> None:
     ignore_sigint()
-    if parent is not None:
-        _exit_with_parent(parent)
-    if environ is not None and environ != dict(os.environ):
+    _exit_with_parent(parent)
+    if environ != dict(os.environ):
         # A fork server's worker has the server's environment (that of the
         # first pool); the caller's may have changed since.
         os.environ.clear()
