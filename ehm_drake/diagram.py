@@ -311,7 +311,7 @@ def separate_force_systems(builder, hp: HumanPlant, params: ModelParams, h: floa
         "joint_pid",
         JointPid(layout, gains["kp"], gains["ki"], gains["kd"], gains["integral_limit"],
                  np.zeros(layout.num_rotational), h, implicit_kp=hp.implicit_kp))
-    if pid.HasInputPort("plant_state"):  # the plant's PD actuators apply kp
+    if pid.HasInputPort("plant_state"):  # PD actuators, ball joints: the plant's own q
         builder.Connect(plant.get_state_output_port(), pid.GetInputPort("plant_state"))
     # Seat: inertial load of the seat motion, shear restraints.
     inertial = builder.AddNamedSystem("seat_inertial_load",

@@ -23,11 +23,12 @@ from ehm_drake.model.plant import (
     step_split,
 )
 from ehm_drake.model.stepping import segment_frequencies
-from ehm_drake.params import CONTACT_PAIRS, load_params, reference_design
+from ehm_drake.params import CONTACT_PAIRS, apply_variant, load_params, reference_design
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import settle, static_equilibrium, vibrate
 from ehm_drake.systems.joints import _BallIndex, cardan_rates, rpy_rate_matrices
 from ehm_drake.systems.outputs import CHANNEL_NAMES
+from ehm_drake.systems.rotations import rotation_from_rpy
 
 
 def implicit(h: float = 0.001):
@@ -270,28 +271,30 @@ def _responds(T):
     return (T >= 0.1 * peak[None]) & strong[None]
 
 
-def test_designs_are_the_same_model():
+@pytest.mark.parametrize("variant", ["default", "no-integrator"])
+def test_designs_are_the_same_model(variant):
     """Linearized where both have converged in the step (the reference
     design, first-order, at 0.1 ms; the implicit one, second-order, at
-    1 ms), the two designs give the same transmissibility: within 0.5%
-    median over every channel that responds to x, y or z, and within 2% on
-    the fore-aft and vertical channels the ball joints' per-axis damping
-    decides (head x and pitch, trunk and pelvis pitch, pelvis and head z).
-    Responding bins: `_responds`.  (With Drake's one damping value per ball joint, the median
-    was 9%, and head pitch under x differed by up to 45%.)"""
-    freqs = np.linspace(1.0, 10.0, 19)
-    reference = reference_design(load_params())
+    1 ms), the two designs give the same transmissibility: within 0.3%
+    median and 3% in every bin of every channel that responds to x, y or z
+    (`_responds`; measured 0.13% / 1.8% default, 0.19% / 1.7% without
+    integrator).  Three differences were found and removed this way: Drake's
+    one damping value per ball joint (the median was 9%, head pitch under x
+    45% off), the reference PID's torques on the ball joints' angular
+    velocities instead of the Cardan axes (default worst bin 4.6%) and the
+    implicit design's explicit contact damper at the restraint point
+    instead of the contact point (no-integrator 6.7%, knee pitch under z)."""
+    freqs = np.linspace(0.5, 12.0, 24)
+    reference = apply_variant(reference_design(load_params()), variant)
     reference.simulation.time_step_s = 0.0001
     T = {name: _transmissibility(params, freqs) for name, params in
-         (("ref", reference), ("imp", implicit(0.001)))}
-    ratio = T["imp"] / T["ref"] - 1.0
+         (("ref", reference), ("imp", apply_variant(implicit(0.001), variant)))}
+    ratio = np.abs(T["imp"] / T["ref"] - 1.0)
     responds = _responds(T["ref"])
-    assert np.median(np.abs(ratio[responds])) < 0.005
-    for channel, axis in (("head_x", 0), ("head_pitch", 0), ("trunk_pitch", 0),
-                          ("pelvis_pitch", 0), ("pelvis_z", 2), ("head_z", 2)):
-        c = CHANNEL_NAMES.index(channel)
-        err = np.abs(ratio[responds[:, c, axis], c, axis])
-        assert np.max(err) < 0.02, (channel, np.round(err, 3))
+    assert np.median(ratio[responds]) < 0.003
+    worst = np.unravel_index(np.argmax(np.where(responds, ratio, 0.0)), ratio.shape)
+    assert ratio[worst] < 0.03, (freqs[worst[0]], CHANNEL_NAMES[worst[1]], "xyz"[worst[2]],
+                                 ratio[worst])
 
 
 def _step_errors(steps, freqs):
@@ -349,6 +352,71 @@ def test_restraint_constraints_sit_at_the_restraint_points():
         x[name] = np.array(s.marker_poses(m.plant.GetPositionsAndVelocities(
             m.plant_context(ctx)))[2][0])  # head marker position
     np.testing.assert_allclose(x["imp"], x["ref"], atol=2e-5)
+
+
+def test_contact_points_are_the_ellipsoids_deepest_points():
+    """`contact_points_B`: the point of the ellipsoid whose outward normal
+    is against the seat part's (the deepest into it), for any orientation;
+    in the reference posture the restraint's attachment point."""
+    from ehm_drake.model.restraints import contact_points_B
+
+    rng = np.random.default_rng(4)
+    semi = rng.uniform(0.03, 0.2, (20, 3))
+    centre = rng.normal(scale=0.1, size=(20, 3))
+    normal = np.tile([0.0, 0.0, 1.0], (20, 1))
+    R = np.array([rotation_from_rpy(rng.uniform(-0.4, 0.4, 3)) for _ in range(20)])
+    C = contact_points_B(R, centre, semi, normal)
+    d = (C - centre) / semi
+    np.testing.assert_allclose(np.sum(d * d, axis=1), 1.0, rtol=1e-12)  # on the surface
+    outward = np.einsum("kij,kj->ki", R, (C - centre) / semi**2)  # its normal, in S
+    np.testing.assert_allclose(outward / np.linalg.norm(outward, axis=1)[:, None], -normal,
+                               atol=1e-12)
+    C0 = contact_points_B(np.tile(np.eye(3), (20, 1, 1)), centre, semi, normal)
+    np.testing.assert_allclose(C0, centre - semi * normal, atol=1e-15)
+
+
+@pytest.mark.parametrize("variant", ["default", "no-integrator"])
+def test_the_explicit_contact_damper_acts_where_sap_touches(variant):
+    """The implicit design splits each contact damper between SAP, which
+    applies it at the contact point, and `ForceLaws`: its explicit half acts
+    at the ellipsoid's deepest point, on the line of Drake's contact point
+    along the normal (only the tangential position sets a normal force's
+    moment; measured 0.003-0.53 mm off it, the accuracy of Drake's
+    ellipsoid penetration query), not at the restraint's body-fixed point,
+    which the body's rotation carries off it (0.5-3.8 mm in the default
+    posture, 1.6-24 mm where the no-integrator posture turns trunk and
+    legs).  Until stop
+    40 it acted at the restraint point, and the no-integrator variant's two
+    designs differed by 6.7% (knee pitch under z; now 1.7%)."""
+    p = apply_variant(implicit(0.005), variant)
+    model = build_diagram(p, guard=False, seat_forces=False)
+    ctx, _ = static_equilibrium(model)
+    plant, pc = model.plant, model.plant_context(ctx)
+    geometry = model.systems["force_laws"]._geometry
+    C_B = np.concatenate(geometry.contact_points(plant, pc), axis=1)
+    P_B = np.concatenate([P for _, P, _ in geometry.groups], axis=1)
+    inspector = model.hp.scene_graph.model_inspector()
+    results = plant.get_contact_results_output_port().Eval(pc)
+    drake = {}
+    for i in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(i)
+        name = inspector.GetName(info.point_pair().id_A).split("::")[-1]
+        drake[name] = info.contact_point()
+    # Every ellipsoid touches (the no-integrator body leaves its upper pad).
+    assert set(drake) == {pt.name for pt in geometry.points} - (
+        {"upper_back"} if variant == "no-integrator" else set())
+    off = {}
+    for k, row in enumerate(geometry.order):
+        point = geometry.points[row]
+        if point.name not in drake:
+            continue
+        X_WB = plant.EvalBodyPoseInWorld(pc, plant.GetBodyByName(point.body))
+        tangential = np.eye(3) - np.outer(point.normal, point.normal)
+        d_C = tangential @ (X_WB.multiply(C_B[:, k]) - drake[point.name])
+        d_P = tangential @ (X_WB.multiply(P_B[:, k]) - drake[point.name])
+        assert np.linalg.norm(d_C) < 1e-3, (point.name, d_C)
+        off[point.name] = np.linalg.norm(d_P)
+    assert max(off.values()) > (1e-2 if variant == "no-integrator" else 3e-3), off
 
 
 def test_unknown_design_is_refused_by_name():

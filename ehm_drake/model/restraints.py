@@ -48,6 +48,23 @@ SEAT_PARTS = {
 SEAT_PART_NAMES = tuple(SEAT_PARTS)
 
 
+def contact_points_B(R_WB, p_BE, semi_axes, normal_W):
+    """The point of each contact ellipsoid deepest into its seat part: its
+    extreme point against the part's outward normal, in the body frame
+    (k x 3; `R_WB` (k, 3, 3) the bodies' orientations, `p_BE`, `semi_axes`
+    (k x 3) the ellipsoids, `normal_W` (k x 3) the parts' normals).  With the
+    normal m = R_WB^T n in the body frame and D = diag(semi-axes), that point
+    is p_BE - D^2 m / |D m|; SAP's point contact acts there (to within the
+    penetration), so a contact damper applied by the model's own laws
+    belongs there too, not at a body-fixed point that the body's rotation
+    carries off it.  In the reference posture (R_WB = I) it is the
+    restraint's attachment point p_BP."""
+    m = np.add.reduce(R_WB * normal_W[:, :, None], axis=1)
+    dm = semi_axes * m
+    norm = np.sqrt(np.add.reduce(dm * dm, axis=1))
+    return p_BE - (semi_axes * dm) / norm[:, None]
+
+
 @dataclass(frozen=True)
 class RestraintPoint:
     """One shear restraint: a body point, its seat anchor and two axes."""
@@ -63,6 +80,11 @@ class RestraintPoint:
     #: Seat face position minus the anchor along the normal (m): the
     #: point's penetration is face_offset - (p - p_SA).normal.
     face_offset: float
+    #: The contact ellipsoid: its centre in the body frame and its semi-axes
+    #: (m; its axes are the body frame's).  Where it touches the seat part
+    #: moves over the ellipsoid as the body turns (`contact_points_B`).
+    p_BE: np.ndarray
+    semi_axes: np.ndarray
 
 
 def restraint_points(hp) -> list[RestraintPoint]:
@@ -85,13 +107,16 @@ def restraint_points(hp) -> list[RestraintPoint]:
             body = plant.GetBodyFromFrameId(inspector.GetFrameId(gid))
             # Ellipsoid axes are parallel to the body frame, which is parallel
             # to S in the reference posture: extreme point along -normal.
-            p_BP = inspector.GetPoseInFrame(gid).translation() - semi * normal
+            X_BE = inspector.GetPoseInFrame(gid)
+            assert np.allclose(X_BE.rotation().matrix(), np.eye(3)), name
+            p_BE = X_BE.translation()
+            p_BP = p_BE - semi * normal
             X_SB = plant.EvalBodyPoseInWorld(context, body)
             p_SA = X_SB.multiply(p_BP)
             c, size = hp.body.seat.boxes[part]
             face = float(c @ normal + 0.5 * size @ np.abs(normal))
             points.append(RestraintPoint(name, pair, part, body.name(), p_BP, p_SA, axes,
-                                         normal, face - float(p_SA @ normal)))
+                                         normal, face - float(p_SA @ normal), p_BE, semi))
     return points
 
 

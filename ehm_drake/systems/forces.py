@@ -38,12 +38,13 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from ..model.plant import JointLayout
 from . import PlantScratch, define_system
 from .his import head_in_space_torque
-from .joints import PID_PARAMETERS, _BallIndex, passive_torque
+from .joints import PID_PARAMETERS, _BallIndex, cardan_to_generalized, passive_torque
 from .rotations import rotation_from_rpy
 from .seat import (
     SEAT_PART_NAMES,
     RestraintGeometry,
     check_restraint_parameters,
+    contact_damping_force,
     restraint_axis_parameters,
     restraint_law,
     restraint_limits,
@@ -117,6 +118,76 @@ class RestraintView(LawView):
         return self.system.restraint_displacements(context)[1]
 
 
+class _ContactProbe:
+    """The restraint points and the contact points (`contact_points_B`)
+    in the same plant calls as the restraint points alone: per body one
+    position query of [P_B | origin | unit tips], whose differences give
+    each contact ellipsoid's normal in its body frame, m = R_WB^T n (a
+    normal is a coordinate axis of S: m is a row of R_WB), and one Jacobian
+    query of [P_B | C_B].  Returns the restraint points' positions (3 x n)
+    and Jacobian (3n x nv), both grouped by body as in `RestraintGeometry`,
+    and for each contact point (grouped order) the normal row of its
+    Jacobian (n x nv) and its displacement along the normal from the
+    anchor (n).  Poses and `contact_points_B` (`ShearRestraints`' form)
+    give the same to rounding, at about three times the cost."""
+
+    def __init__(self, geometry: RestraintGeometry):
+        g = geometry
+        axis = np.array([int(np.argmax(np.abs(pt.normal))) for pt in g.points])
+        assert all(np.array_equal(pt.normal, np.eye(3)[a]) for pt, a in zip(g.points, axis,
+                                                                           strict=True))
+        self.probes, p_cols, o_cols, tip_cols, jp_rows, jc_rows, c_cols = \
+            [], [], [], [], [], [], []
+        # [P_B | C_B] of every group side by side, column-major: each group's
+        # block is a contiguous view, and one assignment updates every C_B.
+        self.points = np.zeros((3, 2 * g.n), order="F")
+        self.blocks = []
+        col = row = 0
+        for (_, P_B, rows), k in zip(g.groups, g.counts, strict=True):
+            self.probes.append(np.concatenate([P_B, np.zeros((3, 1)), np.eye(3)], axis=1))
+            start = 2 * (row // 6)
+            self.points[:, start:start + k] = P_B
+            self.blocks.append(slice(start, start + 2 * k))
+            c_cols += range(start + k, start + 2 * k)
+            p_cols += range(col, col + k)
+            o_cols += [col + k] * k
+            tip_cols += [[col + k + 1, col + k + 2, col + k + 3]] * k
+            jp_rows += range(row, row + 3 * k)
+            jc_rows += [row + 3 * (k + i) + axis[r] for i, r in enumerate(rows)]
+            col, row = col + k + 4, row + 6 * k
+        self.c_cols = np.array(c_cols)
+        self.views = [self.points[:, b] for b in self.blocks]
+        self.p_cols, self.o_cols = np.array(p_cols), np.array(o_cols)
+        self.tip_cols = np.array(tip_cols)
+        self.jp_rows, self.jc_rows = np.array(jp_rows), np.array(jc_rows)
+        self.axis = axis[g.order]
+        self.p_BE, self.semi_axes = g.p_BE, g.semi_axes
+        self.n0 = np.array([pt.normal @ pt.p_SA for pt in g.points])[g.order]
+        self.frames = [frame for frame, _, _ in g.groups]
+
+    def __call__(self, plant, context, world):
+        A = np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
+                            for frame, probe in zip(self.frames, self.probes, strict=True)],
+                           axis=1)
+        o = A[self.axis, self.o_cols]  # the body origins' coordinate along the normal
+        m = A[self.axis[:, None], self.tip_cols] - o[:, None]
+        dm = self.semi_axes * m
+        C = self.p_BE - self.semi_axes * dm / np.sqrt(np.add.reduce(dm * dm, axis=1))[:, None]
+        if C.dtype == float:
+            self.points[:, self.c_cols] = C.T
+            points = self.views
+        else:  # AutoDiffXd: no float buffer
+            both = self.points.astype(object)
+            both[:, self.c_cols] = C.T
+            points = [both[:, b] for b in self.blocks]
+        kv = JacobianWrtVariable.kV
+        JJ = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, b,
+                                                                     world, world)
+                             for frame, b in zip(self.frames, points, strict=True)])
+        return (A[:, self.p_cols], JJ[self.jp_rows], JJ[self.jc_rows],
+                o + np.add.reduce(m * C, axis=1) - self.n0)
+
+
 class _Constants:
     """What the laws derive from the numeric parameters, once per value."""
 
@@ -127,10 +198,13 @@ class _Constants:
 class _Step:
     """The laws at one state: the generalized force and what the outputs
     and the update read (``w``: the restraints' tangential, normal and
-    constraint forces, stacked as the rows of `ForceLaws`' point product)."""
+    constraint forces, stacked as the rows of `ForceLaws`' point product;
+    ``fd``: the explicit contact dampers' normal force per point, grouped
+    by body, acting at the contact points, whose Jacobian's normal rows are
+    the last rows of ``J``, as ``fd`` is the end of ``G``)."""
 
     __slots__ = ("f", "J", "G", "pid_torque", "pid_force", "passive_force", "his_torque",
-                 "J_his", "w", "pos", "pos_n", "z_next", "slip_next")
+                 "J_his", "w", "pos", "pos_n", "z_next", "slip_next", "fd")
 
 
 @define_system("ForceLaws_", __name__)
@@ -224,6 +298,12 @@ def ForceLaws_(T):
             self._contact_damping = (None if contact_damping is None
                                      or not np.any(contact_damping)
                                      else np.asarray(contact_damping, float))
+            if self._contact_damping is not None:  # (in the grouped order)
+                self._probe = _ContactProbe(g)
+                self._contact_damping_g = self._contact_damping[g.order]
+                self._face_g = g.face[g.order]
+                self._grouped_row = np.empty(g.n, dtype=int)
+                self._grouped_row[g.order] = np.arange(g.n)
             # The restraints' force per seat part straight from the law's
             # axis and normal forces, stacked.
             self._seat = np.hstack([g.sum_parts @ g.A.T, g.sum_parts @ g.N.T])
@@ -394,18 +474,29 @@ def ForceLaws_(T):
                 R_WH = p.EvalBodyPoseInWorld(ctx, self._head_body).rotation().matrix()
                 J_head = p.CalcJacobianAngularVelocity(ctx, kv, self._head, W, W)
                 J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, self._trunk, W, W)
-            groups = self._geometry.groups
+            geometry = self._geometry
+            groups = geometry.groups
+            J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, self._instances, kv, W, W)
             # (np.concatenate: np.vstack and np.hstack cost 1-1.5 us more in
             # Python on these small blocks.)
-            s.J = J = np.concatenate([
-                *(p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
-                  for frame, P_B, _ in groups),
-                J_head, J_trunk,
-                p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, self._instances, kv, W, W)])
-            P = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
-                                for frame, P_B, _ in groups], axis=1)
+            if self._contact_damping is None:
+                s.J = J = np.concatenate([
+                    *(p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
+                      for frame, P_B, _ in groups), J_head, J_trunk, J_com])
+                P = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
+                                    for frame, P_B, _ in groups], axis=1)
+            else:
+                # The restraint points and, in the same calls, the contact
+                # points, where the explicit half of each contact damper acts.
+                # Their Jacobian's normal rows go last in J (velocities and
+                # forces in the same products).
+                P, J_P, J_contact, pos_n = self._probe(p, ctx, W)
+                s.J = J = np.concatenate([J_P, J_head, J_trunk, J_com, J_contact])
             V = J @ x[nq:]
             n3 = 3 * len(self._points)
+            if self._contact_damping is not None:
+                s.fd = contact_damping_force(self._contact_damping_g, self._face_g, pos_n,
+                                             V[n3 + 9:])
             # Head-in-space.
             w_WH = V[n3:n3 + 3] if self._feedback_port is None else J_head @ xf[nq:]
             s.his_torque = tau = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
@@ -420,7 +511,7 @@ def ForceLaws_(T):
             face = self._geometry.face
             fmax = restraint_limits(c.restraint, face, pos_n)
             f_t, f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:n3], slip,
-                                     self._contact_damping, fmax)
+                                     fmax)
             if self._constraints is not None:
                 # + the constraints' force at the step's start, s u (see
                 # `constraint_point_forces`).
@@ -437,12 +528,15 @@ def ForceLaws_(T):
             s.slip_next = slip_update(c.restraint, face, pos, pos_n, slip, fmax)
             # Joint PID (its derivative is the plant's joint damping; the
             # plant's PD actuators apply implicit_kp about 0) and the update
-            # of its integral.
+            # of its integral.  Its torques are Cardan torques, as the
+            # springs': on ball joints mapped by N(q)^T at the plant's q.
             z = self._discrete(context, self._z)
             e = xf[L.rot_q] - c.reference
             s.pid_force = pi = c.neg_kp * e + c.neg_ki * z
             s.pid_torque = pi + c.neg_kd * xf[self._rot_v_x]
-            if self._implicit_kp is not None:
+            if not self._cardan_chains:
+                s.pid_force = cardan_to_generalized(self._ball, x[L.rot_q], pi)
+            elif self._implicit_kp is not None:
                 s.pid_force = pi + self._implicit_kp * x[L.rot_q]
             s.z_next = np.minimum(np.maximum(z + self._period * e, c.neg_bound), c.bound)
             # Passive joints.  On Cardan chains (no ball joint) the Cardan
@@ -462,7 +556,9 @@ def ForceLaws_(T):
                                                  self._damping)
             # The sum: restraints, head-in-space (+tau on the head, -tau on
             # the trunk), inertial load -m a at the centre of mass, joints.
-            s.G = np.concatenate([F, tau, -tau, -self._mass * self._a_port.Eval(context)])
+            s.G = np.concatenate([F, tau, -tau, -self._mass * self._a_port.Eval(context)]
+                                 if self._contact_damping is None else
+                                 [F, tau, -tau, -self._mass * self._a_port.Eval(context), s.fd])
             if self._feedback_port is not None:  # head-in-space mapped at xf
                 s.G[n3:n3 + 6] = 0.0
                 f = J.T @ s.G + s.J_his.T @ tau
@@ -489,15 +585,23 @@ def ForceLaws_(T):
         def _out_his_torque(self, context, output):
             output.SetFromVector(self._step.Eval(context).his_torque)
 
+        def _normal_forces(self, s):
+            """The restraints' normal force per point with the explicit
+            contact dampers' (part of the contact force on that seat part)."""
+            n2 = 2 * len(self._points)
+            f_n = s.w[n2:n2 + len(self._points)]
+            return f_n if self._contact_damping is None else f_n + s.fd[self._grouped_row]
+
         def _out_seat_forces(self, context, output):
             s = self._step.Eval(context)
-            output.SetFromVector(self._seat @ s.w[:3 * len(self._points)])
+            n2 = 2 * len(self._points)
+            output.SetFromVector(self._seat @ np.concatenate([s.w[:n2], self._normal_forces(s)]))
 
         def _out_point_forces(self, context, output):
             s = self._step.Eval(context)
             n2 = 2 * len(self._points)
             output.SetFromVector(self._geometry.A.T @ s.w[:n2]
-                                 + self._geometry.N.T @ s.w[n2:n2 + len(self._points)])
+                                 + self._geometry.N.T @ self._normal_forces(s))
 
         def _out_normal(self, context, output):
             output.SetFromVector(self._step.Eval(context).pos_n)
@@ -508,7 +612,9 @@ def ForceLaws_(T):
 
         def _law_output(self, law: str):
             n3 = 3 * len(self._points)
-            rows = {"shear_restraints": slice(0, n3), "head_in_space": slice(n3, n3 + 6),
+            shear = (slice(0, n3) if self._contact_damping is None else
+                     np.r_[0:n3, n3 + 9:n3 + 9 + len(self._points)])  # + contact dampers
+            rows = {"shear_restraints": shear, "head_in_space": slice(n3, n3 + 6),
                     "seat_inertial_load": slice(n3 + 6, n3 + 9)}.get(law)
 
             def calc(context, output):

@@ -15,15 +15,15 @@ implicit design, the explicit half of every damper (`model.stepping`):
 that remainder acts here about the Cardan rates, rpy_dot = N(q) w, mapped
 back by N^T.
 
-The PID acts on the generalized coordinates: the joint angles q (error
-against the reference posture) and the joint velocities v, and returns
-generalized forces.  On the implicit design's Cardan chains these are the
-Cardan angles, their rates and Cardan torques exactly.  On the reference
-design's ball joints the torques act on the angular-velocity coordinates
-(about the joint's parent-frame axes): the same at the reference posture,
-but a joint holding a static torque (the integral action under the body's
-weight) gets a slightly different stiffness than with Cardan torques (see
-README, "Two designs").
+The PID acts on the joint angles q (error against the reference posture)
+and the joint velocities v.  Its torques are Cardan torques, as the
+springs' are: on the implicit design's Cardan chains the generalized forces
+themselves; on the reference design's ball joints mapped by N(q)^T at the
+plant's own configuration.  (Until stop 40 they acted on the ball joints'
+angular-velocity coordinates: the same at the reference posture, but a
+joint holding a static torque -- the integral action under the body's
+weight -- got a stiffness ~10% off in yaw and roll, and the two designs
+differed by up to 4.6% in transmissibility; see README, "Two designs".)
 
 Both are `TemplateSystem`s (float, AutoDiffXd).
 """
@@ -213,9 +213,11 @@ def JointPid_(T):
         The plant applies the derivative part as joint damping
         (`derivative_in_plant`) and, on the implicit design, the
         proportional part `implicit_kp` about angle 0 in its PD actuators;
-        the generalized force is the PID torque minus those.  With
-        `implicit_kp`, an input ``plant_state`` gives the state the plant's
-        actuators see (the PID's ``state`` may be delayed).
+        the generalized force is the PID torque minus those, mapped to the
+        ball joints' coordinates by N(q)^T.  With `implicit_kp` or ball
+        joints, an input ``plant_state`` gives the plant's own state (the
+        PID's ``state`` may be delayed): the state the actuators see and
+        the configuration at which a ball joint's torque acts.
         """
 
         def _construct(self, layout: JointLayout, kp, ki, kd, integral_limit, reference,
@@ -233,7 +235,8 @@ def JointPid_(T):
             self._init = np.concatenate(parts)
             self._period = float(period)
             self._state_port = self.DeclareVectorInputPort("state", layout.nq + layout.nv)
-            if self._implicit_kp is not None:
+            self._ball = _BallIndex(layout)
+            if self._implicit_kp is not None or len(self._ball.roll):
                 self._plant_port = self.DeclareVectorInputPort("plant_state",
                                                                layout.nq + layout.nv)
             self._param = self.DeclareNumericParameter(BasicVector_[T](self._init))
@@ -281,6 +284,9 @@ def JointPid_(T):
                 tau = tau + g[2 * n:3 * n] * x[L.nq + L.rot_v]  # the plant applies -Kd v
             if self._implicit_kp is not None:  # the plant applies -Kp q
                 tau = tau + self._implicit_kp * self._plant_port.Eval(context)[L.rot_q]
+            if len(self._ball.roll):
+                tau = cardan_to_generalized(self._ball, self._plant_port.Eval(context)[L.rot_q],
+                                            tau)
             f = np.zeros(L.nv, dtype=tau.dtype)
             f[L.rot_v] = tau
             output.SetFromVector(f)

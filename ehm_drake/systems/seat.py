@@ -29,6 +29,7 @@ from ..model.restraints import (  # noqa: F401  (re-exported: the seat's parts a
     SEAT_PARTS,
     RestraintConstraints,
     RestraintPoint,
+    contact_points_B,
     restraint_points,
 )
 from ..model.stepping import step_split
@@ -141,6 +142,13 @@ class RestraintGeometry:
         self.sum_parts = P
         self.axis_of = np.repeat(np.arange(n), 2)
         self.world = plant.world_frame()
+        # The contact ellipsoids, body by body (`contact_kinematics`).
+        self.bodies = [plant.GetBodyByName(b) for b in groups]
+        self.counts = [len(rows) for _, _, rows in self.groups]
+        self.splits = np.cumsum(self.counts)[:-1]
+        self.p_BE = np.array([points[i].p_BE for i in self.order])
+        self.semi_axes = np.array([points[i].semi_axes for i in self.order])
+        self.normal_grouped = np.array([points[i].normal for i in self.order])
 
     def kinematics(self, plant, context, v):
         """Stacked point Jacobian J (3n x nv, rows body by body);
@@ -163,6 +171,34 @@ class RestraintGeometry:
         p_pts[self.order], v_pts[self.order] = pos.reshape(-1, 3), vel.reshape(-1, 3)
         return (J, self.A_grouped @ pos - self.a0, self.A_grouped @ vel,
                 self.N_grouped @ pos - self.n0, self.N_grouped @ vel, p_pts, v_pts)
+
+
+    def contact_points(self, plant, context) -> list:
+        """Each group's contact points in its body's frame (3 x k), at
+        the plant `context` (`contact_points_B`)."""
+        R = np.array([plant.EvalBodyPoseInWorld(context, b).rotation().matrix()
+                      for b in self.bodies])
+        if len(self.counts) != len(self.p_BE):
+            R = np.repeat(R, self.counts, axis=0)
+        C = contact_points_B(R, self.p_BE, self.semi_axes, self.normal_grouped).T
+        return np.split(C, self.splits, axis=1)
+
+    def contact_kinematics(self, plant, context, v):
+        """Where each contact ellipsoid touches its seat part
+        (`contact_points_B`, moving over the ellipsoid as the body turns):
+        the points' stacked Jacobian (3n x nv, rows body by body, as
+        `kinematics`), their displacement along the normal from the
+        anchors and their velocity along it (n each, point order), and
+        the points in each body's frame (3 x k per group)."""
+        kv = JacobianWrtVariable.kV
+        world = self.world
+        C_B = self.contact_points(plant, context)
+        pos = np.concatenate([plant.CalcPointsPositions(context, frame, c, world).T.reshape(-1)
+                              for (frame, _, _), c in zip(self.groups, C_B, strict=True)])
+        J = np.vstack([plant.CalcJacobianTranslationalVelocity(context, kv, frame, c, world,
+                                                               world)
+                       for (frame, _, _), c in zip(self.groups, C_B, strict=True)])
+        return J, self.N_grouped @ pos - self.n0, self.N_grouped @ (J @ v), C_B
 
 
 def restraint_axis_parameters(vector, axis_of) -> dict:
@@ -198,13 +234,12 @@ def restraint_limits(prm: dict, face, pos_n):
     return fmax
 
 
-def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, contact_damping, fmax=None):
+def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, fmax=None):
     """(tangential force per axis (2n), normal force per point (n)): the
     force-limited shear spring-damper beyond the slipped anchor (gated by
-    contact where asked), the extra normal forces about the reference
-    compression, and the explicit part of the contact damping
-    (`contact_damping`, per point, or None).  `fmax`: the force limits
-    (`restraint_limits`) if already computed."""
+    contact where asked) and the extra normal forces about the reference
+    compression.  `fmax`: the force limits (`restraint_limits`) if already
+    computed."""
     fmax = restraint_limits(prm, face, pos_n) if fmax is None else fmax
     f = np.minimum(np.maximum(-prm["k"] * (pos - slip) - prm["c"] * vel, -fmax), fmax)
     contact = None
@@ -217,9 +252,17 @@ def restraint_law(prm: dict, face, pos, vel, pos_n, vel_n, slip, contact_damping
         d = prm["ref"] - pos_n  # extra compression (m)
         touching = in_contact(face, pos_n)
         fn = (prm["k3"] * d * d * d + prm["k_lin"] * d - prm["c_lin"] * vel_n) * touching
-    if contact_damping is not None:
-        fn = fn - contact_damping * vel_n * in_contact(face, pos_n)
     return f, fn
+
+
+def contact_damping_force(contact_damping, face, pos_n, vel_n):
+    """The explicit part of the contact dampers (implicit design,
+    `contact_damping` per point, N s/m): a normal force per point (n, N)
+    while the ellipsoid penetrates its seat part, from the normal
+    displacement and velocity of its contact point
+    (`RestraintGeometry.contact_kinematics`), where SAP applies the rest
+    of the damper."""
+    return -contact_damping * vel_n * in_contact(face, pos_n)
 
 
 def constraint_point_forces(constraints: RestraintConstraints, axis_of, p_pts, v_pts):
@@ -274,7 +317,9 @@ def ShearRestraints_(T):
         generalized force is then the force law minus their force
         evaluated here at the step's start.  `contact_damping` (per point,
         N s/m): the explicit part of the contact pair's damping, applied
-        along the normal while the point is in contact (reported in the
+        along the normal at the contact point, the ellipsoid's point
+        deepest into its seat part (`contact_points_B`: where SAP applies
+        the rest of the damper), while it penetrates (reported in the
         point and seat forces: it is part of the contact force).  (The
         implicit design's diagram uses `ForceLaws`, which applies this law
         with the others in one system.)"""
@@ -304,6 +349,12 @@ def ShearRestraints_(T):
                 "restraint kinematics",
                 ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 7),
                               calc=self._calc_kinematics),
+                prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())},
+            )
+            self._contact_kin = self.DeclareCacheEntry(
+                "contact point kinematics",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 4),
+                              calc=self._calc_contact_kinematics),
                 prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())},
             )
             # Per-axis stiffness, damping, force limit and slip threshold,
@@ -357,6 +408,21 @@ def ShearRestraints_(T):
             ctx = self._scratch.set_state(x)
             value.set_value(self._geometry.kinematics(self._scratch.plant, ctx, x[self._nq:]))
 
+        def _calc_contact_kinematics(self, context, value):
+            x = self._state_port.Eval(context)
+            ctx = self._scratch.set_state(x)
+            value.set_value(self._geometry.contact_kinematics(self._scratch.plant, ctx,
+                                                              x[self._nq:]))
+
+        def _contact_damping_force(self, context):
+            """The explicit contact dampers' normal force per point (n), at
+            the contact points (None without them)."""
+            if self._contact_damping is None:
+                return None
+            _, pos_n, vel_n, _ = self._contact_kin.Eval(context)
+            return contact_damping_force(self._contact_damping, self._geometry.face, pos_n,
+                                         vel_n)
+
         def _calc_axis_params(self, context, value):
             value.set_value(restraint_axis_parameters(
                 context.get_numeric_parameter(self._param).CopyToVector(),
@@ -370,12 +436,15 @@ def ShearRestraints_(T):
             _, pos, vel, pos_n, vel_n, _, _ = self._kin.Eval(context)
             return restraint_law(self._axis_params.Eval(context), self._geometry.face, pos, vel,
                                  pos_n, vel_n,
-                                 context.get_discrete_state(self._slip).CopyToVector(),
-                                 self._contact_damping)
+                                 context.get_discrete_state(self._slip).CopyToVector())
 
         def _calc_point_forces(self, context, output):
+            # The contact dampers' force is reported with the point's (it is
+            # part of the contact force on that seat part).
             f, fn = self._forces(context)
-            output.SetFromVector(self._geometry.A.T @ f + self._geometry.N.T @ fn)
+            fd = self._contact_damping_force(context)
+            output.SetFromVector(self._geometry.A.T @ f
+                                 + self._geometry.N.T @ (fn if fd is None else fn + fd))
 
         def _calc_force(self, context, output):
             kin = self._kin.Eval(context)
@@ -385,7 +454,11 @@ def ShearRestraints_(T):
             if self._constraints is not None:  # the plant applies them
                 F = F - constraint_point_forces(self._constraints, g.axis_of, kin[5],
                                                 kin[6])[g.order].reshape(-1)
-            output.SetFromVector(kin[0].T @ F)
+            force = kin[0].T @ F
+            fd = self._contact_damping_force(context)
+            if fd is not None:  # at the contact points
+                force = force + self._contact_kin.Eval(context)[0].T @ (g.N_grouped.T @ fd)
+            output.SetFromVector(force)
 
         def _calc_seat_forces(self, context, output):
             output.SetFromVector(self._geometry.sum_parts @ self._force_port.Eval(context))
