@@ -139,6 +139,33 @@ def test_design_option_runs_the_implicit_design_at_its_own_step(sim_dir, tmp_pat
                 (seg, lo, hi)
 
 
+def test_the_implicit_step_is_chosen_by_accuracy(capsys):
+    """`--design implicit` without `--time-step` takes the largest step of
+    5 ms / n that keeps every part of that body and variant second-order
+    accurate: 5 ms for the default model, 5/3 ms for the high-stiffness
+    variant (its lower-torso springs need 2.19 ms; at 5 ms their implicit
+    first-order springs cost it 27% in its worst bin).  The diagram then
+    builds without the step warning.  A step the user gives is kept."""
+    import warnings
+
+    from ehm_drake.cli import _load_model_params, build_parser
+    from ehm_drake.diagram import build_diagram
+
+    def params(*argv):
+        return _load_model_params(build_parser().parse_args(["simulate", "--out", "x", *argv]))
+
+    assert params("--design", "implicit").simulation.time_step_s == 0.005
+    high = params("--design", "implicit", "--variant", "high-stiffness")
+    assert high.simulation.time_step_s == pytest.approx(0.005 / 3, rel=1e-12)
+    assert "second-order" in capsys.readouterr().err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        build_diagram(high, variant="high-stiffness", guard=False, seat_forces=False)
+    given = params("--design", "implicit", "--variant", "high-stiffness", "--time-step", "0.005")
+    assert given.simulation.time_step_s == 0.005
+    assert params("--variant", "high-stiffness").simulation.design == "reference"
+
+
 def test_design_and_time_step_options(tmp_path, capsys):
     from ehm_drake.params import load_params, with_design
 
