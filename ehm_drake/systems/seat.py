@@ -172,14 +172,11 @@ class RestraintGeometry:
         return (J, self.A_grouped @ pos - self.a0, self.A_grouped @ vel,
                 self.N_grouped @ pos - self.n0, self.N_grouped @ vel, p_pts, v_pts)
 
-
     def contact_points(self, plant, context) -> list:
         """Each group's contact points in its body's frame (3 x k), at
         the plant `context` (`contact_points_B`)."""
-        R = np.array([plant.EvalBodyPoseInWorld(context, b).rotation().matrix()
-                      for b in self.bodies])
-        if len(self.counts) != len(self.p_BE):
-            R = np.repeat(R, self.counts, axis=0)
+        R = np.repeat(np.array([plant.EvalBodyPoseInWorld(context, b).rotation().matrix()
+                                for b in self.bodies]), self.counts, axis=0)
         C = contact_points_B(R, self.p_BE, self.semi_axes, self.normal_grouped).T
         return np.split(C, self.splits, axis=1)
 
