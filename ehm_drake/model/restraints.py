@@ -59,7 +59,12 @@ def contact_points_B(R_WB, p_BE, semi_axes, normal_W):
     belongs there too, not at a body-fixed point that the body's rotation
     carries off it.  In the reference posture (R_WB = I) it is the
     restraint's attachment point p_BP."""
-    m = np.add.reduce(R_WB * normal_W[:, :, None], axis=1)
+    return deepest_points(np.add.reduce(R_WB * normal_W[:, :, None], axis=1), p_BE, semi_axes)
+
+
+def deepest_points(m, p_BE, semi_axes):
+    """`contact_points_B` from the parts' normals in the body frames, m
+    (k x 3): p_BE - D^2 m / |D m|."""
     dm = semi_axes * m
     norm = np.sqrt(np.add.reduce(dm * dm, axis=1))
     return p_BE - (semi_axes * dm) / norm[:, None]

@@ -36,6 +36,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 
 from ..model.plant import JointLayout
+from ..model.restraints import deepest_points
 from . import PlantScratch, define_system
 from .his import head_in_space_torque
 from .joints import PID_PARAMETERS, _BallIndex, cardan_to_generalized, passive_torque
@@ -162,7 +163,7 @@ class _ContactProbe:
         self.jp_rows, self.jc_rows = np.array(jp_rows), np.array(jc_rows)
         self.axis = axis[g.order]
         self.p_BE, self.semi_axes = g.p_BE, g.semi_axes
-        self.n0 = np.array([pt.normal @ pt.p_SA for pt in g.points])[g.order]
+        self.n0 = g.n0[g.order]
         self.frames = [frame for frame, _, _ in g.groups]
 
     def __call__(self, plant, context, world):
@@ -171,8 +172,7 @@ class _ContactProbe:
                            axis=1)
         o = A[self.axis, self.o_cols]  # the body origins' coordinate along the normal
         m = A[self.axis[:, None], self.tip_cols] - o[:, None]
-        dm = self.semi_axes * m
-        C = self.p_BE - self.semi_axes * dm / np.sqrt(np.add.reduce(dm * dm, axis=1))[:, None]
+        C = deepest_points(m, self.p_BE, self.semi_axes)
         if C.dtype == float:
             self.points[:, self.c_cols] = C.T
             points = self.views
@@ -302,8 +302,6 @@ def ForceLaws_(T):
                 self._probe = _ContactProbe(g)
                 self._contact_damping_g = self._contact_damping[g.order]
                 self._face_g = g.face[g.order]
-                self._grouped_row = np.empty(g.n, dtype=int)
-                self._grouped_row[g.order] = np.arange(g.n)
             # The restraints' force per seat part straight from the law's
             # axis and normal forces, stacked.
             self._seat = np.hstack([g.sum_parts @ g.A.T, g.sum_parts @ g.N.T])
@@ -317,10 +315,8 @@ def ForceLaws_(T):
             n = g.n
             rows, offsets = [g.A_grouped, g.N_grouped], [g.a0, g.n0]
             if constraints is not None:
-                grouped_row = np.empty(n, dtype=int)
-                grouped_row[g.order] = np.arange(n)
                 S = np.zeros((6 * n, 3 * n))
-                for j, row in enumerate(grouped_row[g.axis_of]):
+                for j, row in enumerate(g.grouped_row[g.axis_of]):
                     S[3 * j:3 * j + 3, 3 * row:3 * row + 3] = np.eye(3)
                 rows.append(S)
                 offsets.append(constraints.p_SQ.reshape(-1))
@@ -590,7 +586,7 @@ def ForceLaws_(T):
             contact dampers' (part of the contact force on that seat part)."""
             n2 = 2 * len(self._points)
             f_n = s.w[n2:n2 + len(self._points)]
-            return f_n if self._contact_damping is None else f_n + s.fd[self._grouped_row]
+            return f_n if self._contact_damping is None else f_n + s.fd[self._geometry.grouped_row]
 
         def _out_seat_forces(self, context, output):
             s = self._step.Eval(context)

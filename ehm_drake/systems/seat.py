@@ -122,6 +122,9 @@ class RestraintGeometry:
                         np.array([points[i].p_BP for i in rows]).T, rows)
                        for b, rows in groups.items()]
         self.order = np.concatenate([rows for _, _, rows in self.groups])
+        # Where each point (in point order) sits in the grouped order.
+        self.grouped_row = np.empty(n, dtype=int)
+        self.grouped_row[self.order] = np.arange(n)
         self.p_SA = np.array([pt.p_SA for pt in points])
         A = np.zeros((2 * n, 3 * n))
         Nm = np.zeros((n, 3 * n))
@@ -185,8 +188,7 @@ class RestraintGeometry:
         (`contact_points_B`, moving over the ellipsoid as the body turns):
         the points' stacked Jacobian (3n x nv, rows body by body, as
         `kinematics`), their displacement along the normal from the
-        anchors and their velocity along it (n each, point order), and
-        the points in each body's frame (3 x k per group)."""
+        anchors and their velocity along it (n each, point order)."""
         kv = JacobianWrtVariable.kV
         world = self.world
         C_B = self.contact_points(plant, context)
@@ -195,7 +197,7 @@ class RestraintGeometry:
         J = np.vstack([plant.CalcJacobianTranslationalVelocity(context, kv, frame, c, world,
                                                                world)
                        for (frame, _, _), c in zip(self.groups, C_B, strict=True)])
-        return J, self.N_grouped @ pos - self.n0, self.N_grouped @ (J @ v), C_B
+        return J, self.N_grouped @ pos - self.n0, self.N_grouped @ (J @ v)
 
 
 def restraint_axis_parameters(vector, axis_of) -> dict:
@@ -350,7 +352,7 @@ def ShearRestraints_(T):
             )
             self._contact_kin = self.DeclareCacheEntry(
                 "contact point kinematics",
-                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 4),
+                ValueProducer(allocate=lambda: AbstractValue.Make((None,) * 3),
                               calc=self._calc_contact_kinematics),
                 prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())},
             )
@@ -416,7 +418,7 @@ def ShearRestraints_(T):
             the contact points (None without them)."""
             if self._contact_damping is None:
                 return None
-            _, pos_n, vel_n, _ = self._contact_kin.Eval(context)
+            _, pos_n, vel_n = self._contact_kin.Eval(context)
             return contact_damping_force(self._contact_damping, self._geometry.face, pos_n,
                                          vel_n)
 
