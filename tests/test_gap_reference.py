@@ -419,11 +419,13 @@ def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
     assert k0 != reference._null_key(g, ["arms", "reflex_delay"], "a")
 
 
-def test_null_threshold_is_an_exact_prediction_bound_for_normal_gains():
+def test_null_threshold_is_a_prediction_bound_for_normal_gains():
     """For normal null gains the threshold from K of them is exceeded by one
-    more subject's gain with probability alpha / n (the Student-t prediction
-    bound), whatever the gains' location and spread: checked by drawing
-    20000 groups of K = 8 and one more subject each (seeded)."""
+    more subject's gain with probability at most alpha / n (the Student-t
+    prediction bound is exact there; the cube-root bound, kept when higher,
+    makes it conservative, but by less than a third), whatever the gains'
+    location and spread: checked by drawing 20000 groups of K = 8 and one
+    more subject each (seeded)."""
     from ehm_drake.gap.calibration import MIN_GAIN, null_threshold
 
     rng = np.random.default_rng(3)
@@ -431,13 +433,38 @@ def test_null_threshold_is_an_exact_prediction_bound_for_normal_gains():
         g = rng.normal(loc, scale, (20000, 9))
         thr = np.array([null_threshold(row[:8], 2, alpha=0.2) for row in g])
         rate = np.mean(g[:, 8] > thr)
-        # 0.1 expected where the bound is above the floor; sd of the rate 0.002.
+        # alpha / n = 0.1; sd of the rate 0.002.
         floor_share = np.mean(thr == MIN_GAIN)
         if loc > 0:
-            assert floor_share < 0.01 and abs(rate - 0.1) < 0.008
+            assert floor_share < 0.01 and 0.067 < rate < 0.104
         else:
             # Mostly floored: a next gain above MIN_GAIN is rarer than alpha / n.
             assert rate < 0.1
+
+
+@pytest.mark.parametrize("dof", [1, 3])
+def test_null_threshold_holds_its_level_for_chi2_like_gains(dof):
+    """A candidate's null gain is a chi^2 difference, skewed like chi^2 with
+    1-3 degrees of freedom.  There the bound on the gains alone (exact for
+    normal ones) is exceeded by one more subject 3.5-6 times as often as
+    alpha / n (1.25% per candidate, 8 candidates, 10% family-wise): the
+    clustered false alarms of the blind runs on `lumped`.  The threshold
+    (with the cube-root bound) is exceeded at most 1.6 times as often, and
+    not less than 0.8 times: it does not buy its level by refusing every
+    effect.  20000 groups of K = 8 and one more subject each (seeded)."""
+    from scipy.stats import t as student_t
+
+    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
+
+    rng = np.random.default_rng(4 + dof)
+    g = 100.0 * rng.chisquare(dof, (20000, 9))
+    level = FAMILY_ALPHA / 8
+    thr = np.array([null_threshold(row[:8], 8) for row in g])
+    q = student_t.ppf(1 - level, 7) * np.sqrt(1 + 1 / 8)
+    linear = np.maximum(MIN_GAIN, g[:, :8].mean(axis=1) + q * g[:, :8].std(axis=1, ddof=1))
+    # sd of a rate near 1.25%: 0.08%.
+    assert np.mean(g[:, 8] > linear) > 3.5 * level
+    assert 0.8 * level < np.mean(g[:, 8] > thr) < 1.6 * level
 
 
 def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
