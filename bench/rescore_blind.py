@@ -8,6 +8,11 @@ folder, so a change to the diagnosis can be measured on the same trials:
 
     python bench/rescore_blind.py RUN [--trials 0-9,12] [--out rescored.json]
 
+With ``--rethreshold`` (a run against a reference group) the stored reports
+are not re-diagnosed but judged again with the current thresholds from
+their stored null gains and evidence (`reference.rethreshold`), in seconds:
+a change to the threshold rule alone, measured on the same fits.
+
 It prints one line per trial and the summary (top-1, top-3, false alarms)
 judged against the run's bar; `--out` writes the per-trial reports' scores.
 """
@@ -37,18 +42,24 @@ def main(argv=None) -> int:
     p.add_argument("--trials", default=None, help="trial numbers, e.g. 0-9,12 (default all)")
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--out", type=Path, default=None, help="write the scores here (JSON)")
+    p.add_argument("--rethreshold", action="store_true",
+                   help="judge the stored reports again with the current thresholds instead "
+                        "of re-diagnosing (reference-group runs)")
     args = p.parse_args(argv)
 
     from ehm_drake.gap.blind import score, summarize
     from ehm_drake.gap.diagnose import diagnose, load_lab_data
     from ehm_drake.gap.group import load_reference
-    from ehm_drake.gap.reference import diagnose_with_reference
+    from ehm_drake.gap.reference import diagnose_with_reference, rethreshold
     from ehm_drake.realities import MODEL_REALITY
 
     settings = json.loads((args.run / "blind_settings.json").read_text())
     reality = settings.get("reality", MODEL_REALITY)
     candidates = settings.get("candidates")
-    group = (load_reference([args.run / "reference"]) if settings.get("references") else None)
+    if args.rethreshold and not settings.get("references"):
+        p.error("--rethreshold needs a run against a reference group")
+    group = (load_reference([args.run / "reference"])
+             if settings.get("references") and not args.rethreshold else None)
     wanted = _trial_set(args.trials)
     results = []
     for rfile in sorted(args.run.glob("trial_*/result.json")):
@@ -58,14 +69,19 @@ def main(argv=None) -> int:
         if "skipped" in old:
             results.append(old)
             continue
-        data = load_lab_data(rfile.parent / "data")
         t0 = time.perf_counter()
-        if group is not None:
+        if args.rethreshold:
+            stored = rfile.parent / "diagnosis" / "report.json"
+            rep = rethreshold(json.loads(stored.read_text()))
+        elif group is not None:
+            data = load_lab_data(rfile.parent / "data")
             diag = diagnose_with_reference(data, group, effects=candidates,
                                            workers=args.workers, progress=False)
+            rep = diag.report
         else:
-            diag = diagnose(data, effects=candidates, workers=args.workers, progress=False)
-        rep = diag.report
+            data = load_lab_data(rfile.parent / "data")
+            rep = diagnose(data, effects=candidates, workers=args.workers,
+                           progress=False).report
         sc = score(old["hidden"], rep, old["detectability"]["detectable"],
                    reality != MODEL_REALITY)
         new = {k: v for k, v in old.items() if k not in ("score",)}

@@ -400,6 +400,53 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
         assert e["beyond_null"] == (e["evidence"] > e["null_threshold"])
     assert "Reference group" in (none / "diagnosis" / "report.md").read_text()
     assert "reference group of 4" in (out / "blind.md").read_text()
+    # Judged again from its stored gains, the report keeps its verdict.
+    from ehm_drake.gap.reference import rethreshold
+
+    again = rethreshold(rep)
+    assert (again["verdict"], again["best_effect"]) == (rep["verdict"], rep["best_effect"])
+    assert [e["effect"] for e in again["ranking"]] == [e["effect"] for e in rep["ranking"]]
+    assert [e["null_threshold"] for e in again["ranking"]] == \
+        [e["null_threshold"] for e in rep["ranking"]]
+
+
+def test_a_stored_report_is_judged_again_with_the_current_thresholds():
+    """`rethreshold` recomputes each candidate's threshold from its stored
+    null gains and the verdict from the evidence: a candidate whose
+    chi^2-like null (one large leave-one-out gain) puts its evidence above
+    the normal bound but below the cube-root bound is not named; the one
+    beyond both is, alone (`explained`) or with a rival within the
+    ambiguity margin (`ambiguous`); none beyond: `unexplained` with
+    significant cells, else `no_significant_gap`."""
+    from scipy.stats import t as student_t
+
+    from ehm_drake.gap.calibration import null_threshold
+    from ehm_drake.gap.reference import rethreshold
+
+    null = [0.0, 3.0, 5.0, 8.0, 12.0, 20.0, 35.0, 160.0]
+    q = student_t.ppf(1 - 0.1 / 3, 7) * np.sqrt(1 + 1 / 8)
+    linear = np.mean(null) + q * np.std(null, ddof=1)
+    thr = null_threshold(null, 3)
+    assert thr > 1.3 * linear
+    between = (linear + thr) / 2
+
+    def report(evidence, reductions, cells=12):
+        return {"method": {"candidates": ["a", "b", "c"], "borrowed_null_spread": 10.0},
+                "significant_cells": cells, "verdict": "?", "best_effect": "?",
+                "ranking": [{"effect": n, "null_gains": null, "evidence": ev,
+                             "gap_reduction_heldout": red, "null_threshold": 0.0,
+                             "beyond_null": True}
+                            for n, ev, red in zip("abc", evidence, reductions, strict=True)]}
+
+    r = rethreshold(report([between, 2 * thr, 1.5 * thr], [0.9, 0.5, 0.2]))
+    assert (r["verdict"], r["best_effect"]) == ("explained", "b")
+    assert [e["effect"] for e in r["ranking"]] == ["b", "c", "a"]
+    assert not r["ranking"][2]["beyond_null"] and r["ranking"][2]["null_threshold"] == thr
+    r = rethreshold(report([between, 2 * thr, 1.5 * thr], [0.9, 0.5, 0.48]))
+    assert (r["verdict"], r["best_effect"], r["ambiguous_with"]) == ("ambiguous", "b", ["c"])
+    assert rethreshold(report([between] * 3, [0.5] * 3))["verdict"] == "unexplained"
+    assert rethreshold(report([between] * 3, [0.5] * 3, cells=0))["verdict"] == \
+        "no_significant_gap"
 
 
 def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):

@@ -484,6 +484,42 @@ def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
             "significant_cells": int(sum(c["significant"] for c in cells))}
 
 
+def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, list[str]]:
+    """The verdict from the candidates' entries (each with `effect`,
+    `evidence`, `beyond_null`, `gap_reduction_heldout`; sorted here in
+    place: beyond their null first, then by the evidence) and the number of
+    cells where the subject differs from the group beyond its scatter.
+    Returns (verdict, best effect or None, the effects it is ambiguous
+    with)."""
+    ranking.sort(key=lambda e: (not e["beyond_null"], -e["evidence"]))
+    supported = [e for e in ranking if e["beyond_null"]]
+    if supported:
+        best = supported[0]
+        close = [e["effect"] for e in supported[1:] if best["gap_reduction_heldout"]
+                 - e["gap_reduction_heldout"] < AMBIGUITY_MARGIN]
+        return ("ambiguous" if close else "explained"), best["effect"], close
+    return ("unexplained" if n_significant else "no_significant_gap"), None, []
+
+
+def rethreshold(report: dict) -> dict:
+    """A reference-group `report` judged again with this code's thresholds
+    (`calibration.null_threshold`) from its stored null gains and evidence:
+    each candidate's `null_threshold` and `beyond_null`, the ranking's order
+    and the verdict (`decide`).  The fits are not redone; the explanation
+    and the gaps after the best effect stay as stored.  Returns a copy."""
+    out = json.loads(json.dumps(report))
+    names = out["method"]["candidates"]
+    spread = out["method"].get("borrowed_null_spread")
+    for e in out["ranking"]:
+        e["null_threshold"] = null_threshold(e["null_gains"], len(names), name=e["effect"],
+                                             borrowed_spread=spread)
+        e["beyond_null"] = bool(e["evidence"] > e["null_threshold"])
+    verdict, best, ambiguous_with = decide(out["ranking"], out["significant_cells"])
+    out.update(verdict=verdict, best_effect=best, ambiguous_with=ambiguous_with,
+               best_candidate=out["ranking"][0]["effect"] if out["ranking"] else None)
+    return out
+
+
 def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_names):
     rows = group.rows
     keys = cell_keys(rows)
@@ -521,39 +557,30 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "base_scales": dict(zip(base_names, np.exp(anchor["log_scales"]).tolist(),
                                     strict=True)),
         })
-    # Beyond the null first, then by the evidence.
-    ranking.sort(key=lambda e: (not e["beyond_null"], -e["evidence"]))
     cells_before = localize(rows, base["chi_all"])
     significant = [c for c in cells_before if c["significant"]]
-    supported = [e for e in ranking if e["beyond_null"]]
-    best = ranking[0] if ranking else None
-    verdict, best_effect, ambiguous_with = "unexplained", None, []
-    if supported:
-        best = supported[0]
-        best_effect = best["effect"]
-        close = [e for e in supported[1:] if best["gap_reduction_heldout"]
-                 - e["gap_reduction_heldout"] < AMBIGUITY_MARGIN]
-        if close:
-            verdict, ambiguous_with = "ambiguous", [e["effect"] for e in close]
+    verdict, best_effect, ambiguous_with = decide(ranking, len(significant))
+    best = ranking[0] if ranking else None  # the supported best when there is one
+    if best_effect is not None:
+        if verdict == "ambiguous":
+            other = next(e for e in ranking if e["effect"] == ambiguous_with[0])
             explanation = (f"{best_effect} and {', '.join(ambiguous_with)} explain the subject's "
                            f"difference from the reference group equally well "
                            f"({100 * best['gap_reduction_heldout']:.0f}% vs "
-                           f"{100 * close[0]['gap_reduction_heldout']:.0f}% of the held-out gap)")
+                           f"{100 * other['gap_reduction_heldout']:.0f}% of the held-out gap)")
         else:
-            verdict = "explained"
             explanation = (f"{best_effect} removes {100 * best['gap_reduction_heldout']:.0f}% of "
                            f"the subject's held-out gap to the reference group (chi^2 gain "
                            f"{best['heldout_gain']:.0f} held out, {best['level_gain']:.0f} on "
                            f"the level differences; together "
                            f"{best['evidence'] / best['null_threshold']:.1f}x their threshold "
                            f"from the group's own subjects)")
-    elif significant:
+    elif verdict == "unexplained":
         explanation = (f"the subject differs from the reference group beyond its scatter in "
                        f"{len(significant)} cells, and no candidate exceeds the gains it reaches "
                        f"on the group's own subjects: an effect outside the candidate library, "
                        f"or a subject outside the group's population")
     else:
-        verdict = "no_significant_gap"
         explanation = ("the subject is within the reference group's scatter (no cell beyond it "
                        "at p < 0.01, Bonferroni) and no candidate exceeds the gains it reaches on "
                        "the group's own subjects")
