@@ -431,7 +431,8 @@ def test_a_stored_report_is_judged_again_with_the_current_thresholds():
     between = (linear + thr) / 2
 
     def report(evidence, reductions, cells=12):
-        return {"method": {"candidates": ["a", "b", "c"], "borrowed_null_spread": 10.0},
+        return {"method": {"design": "reference group", "candidates": ["a", "b", "c"],
+                           "borrowed_null_spread": 10.0},
                 "significant_cells": cells, "verdict": "?", "best_effect": "?",
                 "ranking": [{"effect": n, "null_gains": null, "evidence": ev,
                              "gap_reduction_heldout": red, "null_threshold": 0.0,
@@ -447,6 +448,9 @@ def test_a_stored_report_is_judged_again_with_the_current_thresholds():
     assert rethreshold(report([between] * 3, [0.5] * 3))["verdict"] == "unexplained"
     assert rethreshold(report([between] * 3, [0.5] * 3, cells=0))["verdict"] == \
         "no_significant_gap"
+    # A model-based report has no null gains to judge again: said, not a KeyError.
+    with pytest.raises(DiagnosisError, match="reference group"):
+        rethreshold({"method": {"design": "model"}, "ranking": []})
 
 
 def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):

@@ -501,19 +501,28 @@ def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, li
     return ("unexplained" if n_significant else "no_significant_gap"), None, []
 
 
+def _against_null(name: str, evidence: float, null, n_candidates: int,
+                  spread: float | None) -> dict:
+    """A candidate's threshold from its null gains and whether its evidence
+    is beyond it (the entries of the report's ranking)."""
+    threshold = null_threshold(null, n_candidates, name=name, borrowed_spread=spread)
+    return {"null_threshold": threshold, "beyond_null": bool(evidence > threshold)}
+
+
 def rethreshold(report: dict) -> dict:
     """A reference-group `report` judged again with this code's thresholds
     (`calibration.null_threshold`) from its stored null gains and evidence:
     each candidate's `null_threshold` and `beyond_null`, the ranking's order
     and the verdict (`decide`).  The fits are not redone; the explanation
     and the gaps after the best effect stay as stored.  Returns a copy."""
+    if report.get("method", {}).get("design") != "reference group":
+        raise DiagnosisError("rethreshold needs a diagnosis against a reference group "
+                             "(`diagnose --reference`); this report has no null gains")
     out = json.loads(json.dumps(report))
     names = out["method"]["candidates"]
     spread = out["method"].get("borrowed_null_spread")
     for e in out["ranking"]:
-        e["null_threshold"] = null_threshold(e["null_gains"], len(names), name=e["effect"],
-                                             borrowed_spread=spread)
-        e["beyond_null"] = bool(e["evidence"] > e["null_threshold"])
+        e.update(_against_null(e["effect"], e["evidence"], e["null_gains"], len(names), spread))
     verdict, best, ambiguous_with = decide(out["ranking"], out["significant_cells"])
     out.update(verdict=verdict, best_effect=best, ambiguous_with=ambiguous_with,
                best_candidate=out["ranking"][0]["effect"] if out["ranking"] else None)
@@ -533,7 +542,6 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         gain = _gain(r, base)
         evidence = _evidence(r, base)
         null = [g for g in nulls.get(n, []) if g is not None]
-        threshold = null_threshold(null, len(names), name=n, borrowed_spread=spread)
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
@@ -551,8 +559,8 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "level_params": (None if r.get("level_coords") is None else
                              {e: {p: float(v) for p, v in vals.items()} for e, vals in
                               cand.values(np.array(r["level_coords"])).items()}),
-            "evidence": evidence, "null_gains": null, "null_threshold": threshold,
-            "beyond_null": bool(evidence > threshold),
+            "evidence": evidence, "null_gains": null,
+            **_against_null(n, evidence, null, len(names), spread),
             "level_dependent": cand.level_dependent, "n_effect_params": k,
             "base_scales": dict(zip(base_names, np.exp(anchor["log_scales"]).tolist(),
                                     strict=True)),
