@@ -159,3 +159,20 @@ def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, t
         ("z", "head", "z", 8.0)
     sig = [c for c in rep["localization"] if c["significant"]]
     assert all((c["segment"], c["dof"]) == ("head", "z") for c in sig)
+
+
+def test_trial_fractions_that_cannot_add_up_are_refused_with_the_fix():
+    """`--p-none 1` alone meets the default share of two-effect trials: the
+    error names both values and the way out (a run of no-effect subjects
+    only, which measures the false-alarm rate), and that run plans no
+    effect at all."""
+    from ehm_drake.gap.blind import BlindError, BlindSpec, plan
+
+    with pytest.raises(BlindError, match=r"--p-none 1\.0 and --p-two 0\.1 add up to more than 1"
+                                         r".*--p-none 1 --p-two 0"):
+        BlindSpec(trials=4, seed=1, p_none=1.0).validate()
+    with pytest.raises(BlindError, match=r"--p-two must be a fraction in \[0, 1\], got -0\.1"):
+        BlindSpec(trials=4, seed=1, p_two=-0.1).validate()
+    spec = BlindSpec(trials=40, seed=1, p_none=1.0, p_two=0.0)
+    spec.validate()
+    assert all(t["effects"] == {} for t in plan(spec))

@@ -99,8 +99,14 @@ class BlindSpec:
         for n in self.hidden:
             if n not in EFFECTS:
                 raise BlindError(f"unknown effect {n!r}; choose from {', '.join(EFFECTS)}")
-        if not (0 <= self.p_none <= 1 and 0 <= self.p_two <= 1 and self.p_none + self.p_two <= 1):
-            raise BlindError("p_none and p_two must be fractions with p_none + p_two <= 1")
+        for name, p in (("--p-none", self.p_none), ("--p-two", self.p_two)):
+            if not 0 <= p <= 1:
+                raise BlindError(f"{name} must be a fraction in [0, 1], got {p}")
+        if self.p_none + self.p_two > 1:
+            raise BlindError(
+                f"--p-none {self.p_none} and --p-two {self.p_two} add up to more than 1 "
+                f"(--p-two defaults to {BlindSpec.p_two}); for no-effect trials only pass "
+                "--p-none 1 --p-two 0")
         lo, hi = self.strength
         if not (0 < lo <= hi <= 1):
             raise BlindError(f"strength range must satisfy 0 < lo <= hi <= 1, got {self.strength}")
