@@ -13,8 +13,8 @@ wall time more than CPU time), one core.  Variants:
   forces, joint and head-in-space torques, seat motion, plant state);
 - ``no seat forces``: the same without `SeatForces` (whose contact results
   trigger the SAP solve that the step then reuses);
-- ``no log``: nothing recorded (no output is evaluated but the plant's
-  input);
+- ``no log``: nothing recorded (the divergence guard still checks the
+  state every 10 ms);
 - ``bare``: no log, no seat forces, no divergence guard: the plant, the
   force laws and the excitation alone.
 """
