@@ -25,25 +25,25 @@ import argparse
 import os
 import time
 
+from pydrake.systems.analysis import Simulator
+
 from ehm_drake.diagram import accurate_step, build_diagram
 from ehm_drake.params import load_params
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import StateMap, set_normal_reference, settle
 
+#: name: (the outputs logged at the output rate, `build_diagram` options).
 VARIANTS = {
-    "full": {"log_period": True},
-    "no seat forces": {"log_period": True, "seat_forces": False},
-    "no log": {},
-    "bare": {"seat_forces": False, "guard": False},
+    "full": (True, {}),
+    "no seat forces": (True, {"seat_forces": False}),
+    "no log": (False, {}),
+    "bare": (False, {"seat_forces": False, "guard": False}),
 }
 
 
-def cpu_us_per_step(params, settled, signal, **options) -> float:
-    from pydrake.systems.analysis import Simulator
-
-    if options.pop("log_period", False):
-        options["log_period"] = 1.0 / params.simulation.output_rate_hz
-    model = build_diagram(params, signal=signal, **options)
+def cpu_us_per_step(params, settled, signal, log: bool, options: dict) -> float:
+    period = 1.0 / params.simulation.output_rate_hz if log else None
+    model = build_diagram(params, signal=signal, log_period=period, **options)
     ctx = model.diagram.CreateDefaultContext()
     StateMap(model).set(ctx, settled.state)
     set_normal_reference(model, ctx)
@@ -61,6 +61,9 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=4)
     ap.add_argument("--design", choices=("implicit", "reference"), default="implicit")
     args = ap.parse_args()
+    if not (args.duration > 0 and args.repeats >= 1):
+        ap.error(f"--duration must be > 0 s and --repeats >= 1, got {args.duration} and "
+                 f"{args.repeats}")
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     params = load_params()
@@ -72,9 +75,8 @@ def main() -> None:
                               seed=0, time_step=h)
     best = {name: float("inf") for name in VARIANTS}
     for _ in range(args.repeats):  # interleaved: the machine's drift hits every variant
-        for name, options in VARIANTS.items():
-            best[name] = min(best[name], cpu_us_per_step(params, settled, signal,
-                                                         **dict(options)))
+        for name, (log, options) in VARIANTS.items():
+            best[name] = min(best[name], cpu_us_per_step(params, settled, signal, log, options))
     print(f"{args.design} design, {h * 1e3:g} ms step, {args.duration:g} s of 3D excitation, "
           f"best of {args.repeats} (CPU us per step; real-time factor):")
     for name, us in best.items():
