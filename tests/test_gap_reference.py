@@ -453,6 +453,34 @@ def test_a_stored_report_is_judged_again_with_the_current_thresholds():
         rethreshold({"method": {"design": "model"}, "ranking": []})
 
 
+def test_the_candidate_furthest_beyond_its_own_threshold_is_named():
+    """Two candidates beyond their null: the one whose evidence exceeds its
+    own threshold by more is named, not the one with the larger evidence
+    (`lumped` seed 2046, stop 44: a reflex delay at 243 against 68 lost to
+    the seat cushion's 369 against 318).  The candidates below their null
+    follow, by evidence; with none beyond, the verdict does not name one."""
+    from ehm_drake.gap.reference import decide
+
+    def entry(name, evidence, threshold, red):
+        return {"effect": name, "evidence": evidence, "null_threshold": threshold,
+                "beyond_null": evidence > threshold, "gap_reduction_heldout": red}
+
+    ranking = [entry("seat_cushion_dynamics", 369.0, 318.0, 0.10),
+               entry("visceral_mass", 150.0, 700.0, 0.10),
+               entry("reflex_delay", 243.0, 68.0, 0.20),
+               entry("arms", 40.0, 500.0, 0.01)]
+    verdict, best, close = decide(ranking, 12)
+    assert (verdict, best, close) == ("explained", "reflex_delay", [])
+    assert [e["effect"] for e in ranking] == ["reflex_delay", "seat_cushion_dynamics",
+                                              "visceral_mass", "arms"]
+    # Within the ambiguity margin of the named one's held-out share: ambiguous.
+    ranking[1]["gap_reduction_heldout"] = 0.22
+    assert decide(ranking, 12) == ("ambiguous", "reflex_delay", ["seat_cushion_dynamics"])
+    below = [entry("a", 10.0, 20.0, 0.1), entry("b", 15.0, 100.0, 0.1)]
+    assert decide(below, 3) == ("unexplained", None, [])
+    assert [e["effect"] for e in below] == ["b", "a"]
+
+
 def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
     """The cached null gains are keyed by the scoring code as well as the
     group, candidates and anchor: a change to how candidates are scored
@@ -521,11 +549,15 @@ def test_null_threshold_holds_its_level_for_chi2_like_gains(dof):
 def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
     """Held-out gains take both signs: a one-parameter candidate fitted to
     the training tests (z-score a) and scored on the held-out one (z-score
-    b, relative size c = 0.7) gains 2abc - (ac)^2.  Negative gains must not
+    b, relative size c = 0.7) gains 2abc - (ac)^2.  Large losses must not
     widen the cube-root bound (on the raw gains' cube roots the threshold
-    was 5.6 times the true 1.25% quantile): the threshold stays within 2
-    times of that quantile and is exceeded at most at the nominal rate
-    (within 1.6 times).  20000 groups of K = 8 (seeded)."""
+    was 5.6 times the true 1.25% quantile): clipped at -MIN_GAIN it stays
+    within 3.5 times of that quantile (3.05; clipped at 0, as at stops
+    41-43, 1.6) and is exceeded at most at the nominal rate (within 1.6
+    times).  Conservative on this simulated null (0.3 times its level),
+    the rule is at its level on measured ones:
+    `test_null_threshold_holds_its_level_on_measured_no_effect_subjects`.
+    20000 groups of K = 8 (seeded)."""
     from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
 
     rng = np.random.default_rng(11)
@@ -538,8 +570,39 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
     quantile = np.quantile(gains(400000), 1 - level)
     g = gains((20000, 9))
     thr = np.array([null_threshold(row[:8], 8) for row in g])
-    assert np.median(thr) < 2.0 * quantile
-    assert 0.4 * level < np.mean(g[:, 8] > thr) < 1.6 * level
+    assert np.median(thr) < 3.5 * quantile
+    assert np.mean(g[:, 8] > thr) < 1.6 * level
+
+
+def test_null_threshold_holds_its_level_on_measured_no_effect_subjects():
+    """68 no-effect `lumped` subjects of five blind runs (seeds 2041,
+    2043-2046, each against its run's group of 8; stored by
+    `bench/null_calibration.py`): each candidate's evidence against the
+    threshold from its group's leave-one-out gains.  The threshold is
+    exceeded at 0.4-1.6 times its nominal level per candidate (4 of 544,
+    0.6 times) and names an effect on at most 10% of the subjects (4 of 68);
+    the cube-root bound clipped at 0 (stops 41-43) was exceeded 11 times
+    and named 10 of 68 (15%), the raw cube roots 0: why the clip sits at
+    -MIN_GAIN."""
+    import importlib.util
+    from pathlib import Path
+
+    from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
+
+    here = Path(__file__).resolve().parent
+    spec = importlib.util.spec_from_file_location(
+        "null_calibration", here.parent / "bench" / "null_calibration.py")
+    nc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(nc)
+    data = json.loads((here / "data" / "lumped_null_evidence.json").read_text())
+    assert sum(len(e["evidence"]) for e in data.values()) == 68
+    level = FAMILY_ALPHA / 8
+    now = nc.exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
+    assert now["tests"] == 544
+    assert 0.4 * level < now["exceedances"] / now["tests"] < 1.6 * level
+    assert now["named"] / now["subjects"] <= 0.10
+    old = nc.exceedances(data, nc.clipped_at_zero)
+    assert old["named"] > 2 * now["named"] and old["named"] / old["subjects"] > 0.10
 
 
 def test_null_threshold_covers_the_spread_not_only_the_largest_gain():

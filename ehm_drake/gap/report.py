@@ -133,7 +133,8 @@ def markdown(rep: dict, figures: list[str]) -> str:
                   "exceeds the threshold set by the group's own subjects (each against the "
                   "others). An effect driven by the vibration's amplitude (foam, friction, "
                   "co-contraction) loses the evidence its all-rows fit contradicts on the "
-                  "level differences (down to zero).", "",
+                  "level differences (down to zero). Of the candidates beyond their "
+                  "threshold, the one furthest beyond it is named.", "",
                   "| effect | held-out chi^2 gain | level-difference gain | at the all-rows fit "
                   "| evidence | threshold (group's own subjects) | beyond |",
                   "|---|---|---|---|---|---|---|"]

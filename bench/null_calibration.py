@@ -1,0 +1,121 @@
+"""How often the reference design's threshold is exceeded by subjects
+without any effect: the measured level of `calibration.null_threshold`.
+
+Every no-effect trial of a blind run against a reference group carries, per
+candidate, its evidence and the leave-one-out gains of the run's group (the
+null its threshold is set from).  This script collects them from one or
+more runs, judges them with the current threshold and with the clip of the
+cube-root bound at 0 (stops 41-43), and prints the per-candidate exceedance
+rate against its nominal level (FAMILY_ALPHA / candidates) and the share of
+subjects with any candidate named (the false-alarm rate):
+
+    python bench/null_calibration.py RUN [RUN ...] [--out nulls.json]
+
+`--out` writes the collected values (per run: the candidates' null gains
+and the borrowed spread; per subject: each candidate's evidence), the form
+`tests/data/lumped_null_evidence.json` is stored in (`lumped` seeds 2041,
+2043-2046, 68 no-effect subjects, stop 44).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def collect(runs) -> dict:
+    """{run name: {"candidates", "null_gains" {name: [K]}, "borrowed_spread",
+    "evidence" [[per candidate] per no-effect subject]}} from the runs'
+    stored reports."""
+    out = {}
+    for run in map(Path, runs):
+        entry = None
+        for rf in sorted(run.glob("trial_*/result.json")):
+            r = json.loads(rf.read_text())
+            rep_path = rf.parent / "diagnosis" / "report.json"
+            if "skipped" in r or r["hidden"] or not rep_path.exists():
+                continue
+            rep = json.loads(rep_path.read_text())
+            if rep.get("method", {}).get("design") != "reference group":
+                raise SystemExit(f"{rep_path}: not a diagnosis against a reference group")
+            names = rep["method"]["candidates"]
+            by = {e["effect"]: e for e in rep["ranking"]}
+            if entry is None:
+                entry = {"candidates": names,
+                         "null_gains": {n: by[n]["null_gains"] for n in names},
+                         "borrowed_spread": rep["method"].get("borrowed_null_spread"),
+                         "evidence": []}
+            elif any(by[n]["null_gains"] != entry["null_gains"][n] for n in names):
+                raise SystemExit(f"{rf.parent}: another group's null gains in one run")
+            entry["evidence"].append([by[n]["evidence"] for n in names])
+        if entry is None:
+            raise SystemExit(f"{run}: no diagnosed no-effect trial against a reference group")
+        out[run.name] = entry
+    return out
+
+
+def exceedances(data: dict, threshold) -> dict:
+    """Per-candidate exceedances, tests, subjects with any, subjects, judged
+    with `threshold(null, n_candidates, borrowed_spread)`."""
+    hits = tests = named = subjects = 0
+    for entry in data.values():
+        names = entry["candidates"]
+        thr = np.array([threshold(entry["null_gains"][n], len(names), entry["borrowed_spread"])
+                        for n in names])
+        ev = np.asarray(entry["evidence"], float)
+        over = ev > thr
+        hits += int(over.sum())
+        tests += over.size
+        named += int(over.any(axis=1).sum())
+        subjects += len(ev)
+    return {"exceedances": hits, "tests": tests, "named": named, "subjects": subjects}
+
+
+def clipped_at_zero(null, n, spread):
+    """The threshold as at stops 41-43: the cube-root bound on the gains
+    clipped at 0 (for comparison)."""
+    import math
+
+    from scipy.stats import t as student_t
+
+    from ehm_drake.gap.calibration import DEGENERATE_GAIN, FAMILY_ALPHA, MIN_GAIN
+
+    g = np.asarray([x for x in null if x is not None], float)
+    q = student_t.ppf(1 - FAMILY_ALPHA / n, len(g) - 1) * math.sqrt(1 + 1 / len(g))
+    sd = g.std(ddof=1)
+    if spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
+        sd = max(sd, float(spread))
+    c = np.cbrt(np.maximum(g, 0.0))
+    return float(max(MIN_GAIN, g.mean() + q * sd, float(c.mean() + q * c.std(ddof=1)) ** 3))
+
+
+def main(argv=None) -> int:
+    from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
+
+    p = argparse.ArgumentParser(description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("runs", nargs="+", help="blind run folders (against a reference group)")
+    p.add_argument("--out", help="write the collected null gains and evidence (JSON)")
+    a = p.parse_args(argv)
+    data = collect(a.runs)
+    if a.out:
+        Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
+    current = exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
+    old = exceedances(data, clipped_at_zero)
+    n_cand = {len(e["candidates"]) for e in data.values()}
+    nominal = FAMILY_ALPHA / max(n_cand)
+    print(f"{sum(len(e['evidence']) for e in data.values())} no-effect subjects in "
+          f"{len(data)} runs; nominal per-candidate level {nominal:.4f}")
+    for label, m in (("current threshold", current), ("clipped at 0 (stops 41-43)", old)):
+        rate = m["exceedances"] / m["tests"]
+        print(f"{label:28s} per candidate {m['exceedances']}/{m['tests']} = {rate:.4f} "
+              f"({rate / nominal:.2f} x nominal); subjects named {m['named']}/{m['subjects']} "
+              f"= {m['named'] / m['subjects']:.1%}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
