@@ -553,7 +553,7 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
     widen the cube-root bound (on the raw gains' cube roots the threshold
     was 5.6 times the true 1.25% quantile): clipped at -MIN_GAIN it stays
     within 3.5 times of that quantile (3.05; clipped at 0, as at stops
-    41-43, 1.6) and is exceeded at most at the nominal rate (within 1.6
+    41-43, 1.8) and is exceeded at most at the nominal rate (within 1.6
     times).  Conservative on this simulated null (0.3 times its level),
     the rule is at its level on measured ones:
     `test_null_threshold_holds_its_level_on_measured_no_effect_subjects`.
