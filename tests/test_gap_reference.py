@@ -456,8 +456,8 @@ def test_a_stored_report_is_judged_again_with_the_current_thresholds():
 def test_the_candidate_furthest_beyond_its_own_threshold_is_named():
     """Two candidates beyond their null: the one whose evidence exceeds its
     own threshold by more is named, not the one with the larger evidence
-    (`lumped` seed 2046, stop 44: a reflex delay at 243 against 68 lost to
-    the seat cushion's 369 against 318).  The candidates below their null
+    (`lumped` seed 2046 with the thresholds of stops 41-43: a reflex delay
+    at 243 against 68 lost to the seat cushion's 369 against 318).  The candidates below their null
     follow, by evidence; with none beyond, the verdict does not name one."""
     from ehm_drake.gap.reference import decide
 

@@ -494,10 +494,11 @@ def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, li
     The candidates beyond their null come first, ordered by how far their
     evidence exceeds their own threshold; the others follow by evidence.
     Held-out gains of different candidates are not on one scale under the
-    null: on `lumped` seed 2046's group `seat_cushion_dynamics` reaches a
-    threshold of 318 on subjects without any effect, `reflex_delay` 68, and
-    a reflex delay gaining 243 (3.6 times its bar) lost to the cushion's
-    369 (1.2 times) when the largest evidence was named (stop 44)."""
+    null: on `lumped` seed 2046's group (thresholds as at stops 41-43)
+    `seat_cushion_dynamics` reaches a threshold of 318 on subjects without
+    any effect, `reflex_delay` 68, and a reflex delay gaining 243 (3.6 times
+    its bar) lost to the cushion's 369 (1.2 times) when the largest evidence
+    was named."""
     ranking.sort(key=lambda e: (not e["beyond_null"],
                                 -(e["evidence"] - e["null_threshold"]) if e["beyond_null"]
                                 else -e["evidence"]))
