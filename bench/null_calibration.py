@@ -4,8 +4,8 @@ without any effect: the measured level of `calibration.null_threshold`.
 Every no-effect trial of a blind run against a reference group carries, per
 candidate, its evidence and the leave-one-out gains of the run's group (the
 null its threshold is set from).  This script collects them from one or
-more runs, judges them with the current threshold and with the clip of the
-cube-root bound at 0 (stops 41-43), and prints the per-candidate exceedance
+more runs, judges them with the current threshold and with the cube-root bound's gains
+clipped at -MIN_GAIN instead of 0 (tried at stop 44), and prints the per-candidate exceedance
 rate against its nominal level (FAMILY_ALPHA / candidates) and the share of
 subjects with any candidate named (the false-alarm rate):
 
@@ -74,26 +74,29 @@ def exceedances(data: dict, threshold) -> dict:
     return {"exceedances": hits, "tests": tests, "named": named, "subjects": subjects}
 
 
-def clipped_at_zero(null, n, spread):
-    """The threshold as at stops 41-43: the cube-root bound on the gains
-    clipped at 0 (for comparison)."""
+def clipped_at(clip: float):
+    """`calibration.null_threshold` with the cube-root bound's gains clipped
+    at `clip` instead of 0 (the library's rule is `clipped_at(0.0)`; stop 44
+    tried -MIN_GAIN): a threshold(null, n_candidates, borrowed_spread)."""
     import math
 
     from scipy.stats import t as student_t
 
     from ehm_drake.gap.calibration import DEGENERATE_GAIN, FAMILY_ALPHA, MIN_GAIN
 
-    g = np.asarray([x for x in null if x is not None], float)
-    q = student_t.ppf(1 - FAMILY_ALPHA / n, len(g) - 1) * math.sqrt(1 + 1 / len(g))
-    sd = g.std(ddof=1)
-    if spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
-        sd = max(sd, float(spread))
-    c = np.cbrt(np.maximum(g, 0.0))
-    return float(max(MIN_GAIN, g.mean() + q * sd, float(c.mean() + q * c.std(ddof=1)) ** 3))
+    def threshold(null, n, spread):
+        g = np.asarray([x for x in null if x is not None], float)
+        q = student_t.ppf(1 - FAMILY_ALPHA / n, len(g) - 1) * math.sqrt(1 + 1 / len(g))
+        sd = g.std(ddof=1)
+        if spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
+            sd = max(sd, float(spread))
+        c = np.cbrt(np.maximum(g, clip))
+        return float(max(MIN_GAIN, g.mean() + q * sd, float(c.mean() + q * c.std(ddof=1)) ** 3))
+    return threshold
 
 
 def main(argv=None) -> int:
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
+    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -104,12 +107,12 @@ def main(argv=None) -> int:
     if a.out:
         Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
     current = exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
-    old = exceedances(data, clipped_at_zero)
+    other = exceedances(data, clipped_at(-MIN_GAIN))
     n_cand = {len(e["candidates"]) for e in data.values()}
     nominal = FAMILY_ALPHA / max(n_cand)
     print(f"{sum(len(e['evidence']) for e in data.values())} no-effect subjects in "
           f"{len(data)} runs; nominal per-candidate level {nominal:.4f}")
-    for label, m in (("current threshold", current), ("clipped at 0 (stops 41-43)", old)):
+    for label, m in (("current threshold", current), ("clipped at -MIN_GAIN (stop 44)", other)):
         rate = m["exceedances"] / m["tests"]
         print(f"{label:28s} per candidate {m['exceedances']}/{m['tests']} = {rate:.4f} "
               f"({rate / nominal:.2f} x nominal); subjects named {m['named']}/{m['subjects']} "
