@@ -580,9 +580,8 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     from getting worse unnoticed (at most 2 times nominal, at least 0.4
     times: not bought by refusing every effect) and records the trade-off
     tried at stop 44: the cube-root gains clipped at -MIN_GAIN instead of 0
-    name at most half as many (4 of 68), but found 26 of 46 effects on the
-    fresh runs against 31 (seeds 2046 and 2047's first 26 trials; not
-    asserted here)."""
+    name at most half as many (4 of 68), but found 30 of 51 effects on the
+    fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
     import importlib.util
     from pathlib import Path
 

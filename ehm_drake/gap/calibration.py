@@ -76,7 +76,7 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     # (stop 44; a loss within the noise taken as the null's own spread), 4
     # instead of 10 of 68 measured no-effect `lumped` subjects had an effect
     # named (`bench/null_calibration.py`), but the fresh effect runs lost
-    # hits: seeds 2046 + 2047's first 26 trials, 26 of 46 found against 31.  Gains that are
+    # hits: seeds 2046 + 2047, 30 of 51 found against 35.  Gains that are
     # mostly negative (a fit ending at its bounds, the spread several
     # hundred) keep the linear bound, the higher one there: the larger of
     # the two is kept.
