@@ -76,27 +76,17 @@ def exceedances(data: dict, threshold) -> dict:
 
 def clipped_at(clip: float):
     """`calibration.null_threshold` with the cube-root bound's gains clipped
-    at `clip` instead of 0 (the library's rule is `clipped_at(0.0)`; stop 44
-    tried -MIN_GAIN): a threshold(null, n_candidates, borrowed_spread)."""
-    import math
-
-    from scipy.stats import t as student_t
-
-    from ehm_drake.gap.calibration import DEGENERATE_GAIN, FAMILY_ALPHA, MIN_GAIN
+    at `clip` (the library's default is 0; stop 44 tried -MIN_GAIN): a
+    threshold(null, n_candidates, borrowed_spread)."""
+    from ehm_drake.gap.calibration import null_threshold
 
     def threshold(null, n, spread):
-        g = np.asarray([x for x in null if x is not None], float)
-        q = student_t.ppf(1 - FAMILY_ALPHA / n, len(g) - 1) * math.sqrt(1 + 1 / len(g))
-        sd = g.std(ddof=1)
-        if spread is not None and np.all(np.abs(g) <= DEGENERATE_GAIN):
-            sd = max(sd, float(spread))
-        c = np.cbrt(np.maximum(g, clip))
-        return float(max(MIN_GAIN, g.mean() + q * sd, float(c.mean() + q * c.std(ddof=1)) ** 3))
+        return null_threshold(null, n, borrowed_spread=spread, clip=clip)
     return threshold
 
 
 def main(argv=None) -> int:
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
+    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -106,7 +96,7 @@ def main(argv=None) -> int:
     data = collect(a.runs)
     if a.out:
         Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
-    current = exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
+    current = exceedances(data, clipped_at(0.0))
     other = exceedances(data, clipped_at(-MIN_GAIN))
     n_cand = {len(e["candidates"]) for e in data.values()}
     nominal = FAMILY_ALPHA / max(n_cand)

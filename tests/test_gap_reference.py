@@ -600,7 +600,7 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     assert 0.4 * level < now["exceedances"] / now["tests"] < 2.0 * level
     clipped = nc.exceedances(data, nc.clipped_at(-MIN_GAIN))
     assert 0 < clipped["named"] <= now["named"] / 2
-    # The bench's rule with the clip at 0 is the library's.
+    # The clip at 0 is the library's default.
     assert nc.exceedances(data, nc.clipped_at(0.0)) == now
 
 

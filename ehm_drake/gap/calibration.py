@@ -29,7 +29,8 @@ DEGENERATE_GAIN = 1.0
 
 
 def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
-                   name: str = "a candidate", borrowed_spread: float | None = None) -> float:
+                   name: str = "a candidate", borrowed_spread: float | None = None,
+                   clip: float = 0.0) -> float:
     """The evidence (`reference._evidence`: held-out gain plus level
     gain) a candidate must exceed to be named: the one-sided
     upper prediction bound, at level alpha / n_candidates, of one more
@@ -41,6 +42,8 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     largest: a candidate whose fit ends at a bound on every subject (gains
     -900 to -100) can still reach +150 on the next one, which twice the
     largest (-100) would not cover.  `name`: the candidate, for errors.
+    `clip`: where the cube-root bound's gains are clipped (0; other values
+    are for studies of the rule, `bench/null_calibration.py`).
 
     A degenerate null -- every gain within `DEGENERATE_GAIN` of 0: the
     candidate's fit stays "off" on every reference subject -- has no spread
@@ -80,7 +83,7 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     # mostly negative (a fit ending at its bounds, the spread several
     # hundred) keep the linear bound, the higher one there: the larger of
     # the two is kept.
-    c = np.cbrt(np.maximum(g, 0.0))
+    c = np.cbrt(np.maximum(g, clip))
     cube_bound = float(c.mean() + q * c.std(ddof=1)) ** 3
     return float(max(MIN_GAIN, bound, cube_bound))
 
