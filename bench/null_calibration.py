@@ -11,6 +11,10 @@ subjects with any candidate named (the false-alarm rate):
 
     python bench/null_calibration.py RUN [RUN ...] [--out nulls.json]
 
+A RUN is a blind run's folder, or the JSON `bench/rescore_blind.py --out`
+wrote when it diagnosed a run's trials again (e.g. against another group,
+`--reference`; its ranking entries carry the null gains).
+
 `--out` writes the collected values (per run: the candidates' null gains
 and the borrowed spread; per subject: each candidate's evidence), the form
 `tests/data/lumped_null_evidence.json` is stored in (`lumped` seeds 2041,
@@ -32,6 +36,9 @@ def collect(runs) -> dict:
     stored reports."""
     out = {}
     for run in map(Path, runs):
+        if run.is_file():
+            out[run.stem] = _collect_rescored(run)
+            continue
         entry = None
         for rf in sorted(run.glob("trial_*/result.json")):
             r = json.loads(rf.read_text())
@@ -55,6 +62,30 @@ def collect(runs) -> dict:
             raise SystemExit(f"{run}: no diagnosed no-effect trial against a reference group")
         out[run.name] = entry
     return out
+
+
+def _collect_rescored(path: Path) -> dict:
+    """The same entry from a `rescore_blind.py --out` JSON: its no-effect
+    trials' evidence and the null gains of the group they were diagnosed
+    against (one group per file)."""
+    entry = None
+    for t in json.loads(path.read_text())["trials"]:
+        if "skipped" in t or t["hidden"]:
+            continue
+        by = {e["effect"]: e for e in t["ranking"]}
+        names = sorted(by)
+        if any(by[n].get("null_gains") is None for n in names):
+            raise SystemExit(f"{path}: trial {t['trial']} has no null gains (rescored before "
+                             "rescore_blind.py kept them)")
+        if entry is None:
+            entry = {"candidates": names, "null_gains": {n: by[n]["null_gains"] for n in names},
+                     "borrowed_spread": t.get("borrowed_null_spread"), "evidence": []}
+        elif any(by[n]["null_gains"] != entry["null_gains"][n] for n in names):
+            raise SystemExit(f"{path}: another group's null gains in one run")
+        entry["evidence"].append([by[n]["evidence"] for n in names])
+    if entry is None:
+        raise SystemExit(f"{path}: no rescored no-effect trial")
+    return entry
 
 
 def exceedances(data: dict, threshold) -> dict:
@@ -90,7 +121,8 @@ def main(argv=None) -> int:
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("runs", nargs="+", help="blind run folders (against a reference group)")
+    p.add_argument("runs", nargs="+", help="blind run folders (against a reference group) or "
+                   "rescore_blind.py --out files")
     p.add_argument("--out", help="write the collected null gains and evidence (JSON)")
     a = p.parse_args(argv)
     data = collect(a.runs)

@@ -15,6 +15,12 @@ a change to the threshold rule alone, measured on the same fits.
 
 It prints one line per trial and the summary (top-1, top-3, false alarms)
 judged against the run's bar; `--out` writes the per-trial reports' scores.
+
+With ``--reference DIR [DIR ...]`` the trials are diagnosed against the
+reference subjects in those folders (a run's ``reference`` folder, or subject
+folders) instead of the run's own group: a change of the group (its size, its
+subjects) measured on the same trials, e.g. the run's 8 subjects and another
+run's 8 of the same reality and protocol (stop 45).
 """
 
 from __future__ import annotations
@@ -45,6 +51,9 @@ def main(argv=None) -> int:
     p.add_argument("--rethreshold", action="store_true",
                    help="judge the stored reports again with the current thresholds instead "
                         "of re-diagnosing (reference-group runs)")
+    p.add_argument("--reference", type=Path, nargs="+", default=None,
+                   help="diagnose against these reference folders instead of the run's own "
+                        "group (re-diagnoses)")
     args = p.parse_args(argv)
 
     from ehm_drake.gap.blind import score, summarize
@@ -58,8 +67,13 @@ def main(argv=None) -> int:
     candidates = settings.get("candidates")
     if args.rethreshold and not settings.get("references"):
         p.error("--rethreshold needs a run against a reference group")
-    group = (load_reference([args.run / "reference"])
-             if settings.get("references") and not args.rethreshold else None)
+    if args.reference and args.rethreshold:
+        p.error("--reference re-diagnoses; it cannot be combined with --rethreshold")
+    if args.reference:
+        group = load_reference(args.reference)
+    else:
+        group = (load_reference([args.run / "reference"])
+                 if settings.get("references") and not args.rethreshold else None)
     wanted = _trial_set(args.trials)
     results = []
     for rfile in sorted(args.run.glob("trial_*/result.json")):
@@ -89,7 +103,9 @@ def main(argv=None) -> int:
         new["ranking"] = [{k: e.get(k) for k in ("effect", "heldout_gain", "level_gain",
                                                  "evidence", "null_threshold",
                                                  "beyond_null", "gap_reduction_heldout",
-                                                 "params")} for e in rep["ranking"]]
+                                                 "null_gains", "params")}
+                          for e in rep["ranking"]]
+        new["borrowed_null_spread"] = rep.get("method", {}).get("borrowed_null_spread")
         results.append(new)
         was = old.get("score", {}).get("predicted_label", "-")
         top = ", ".join(f"{e['effect']} {e.get('evidence', e.get('heldout_gain', 0)):.0f}/"

@@ -38,8 +38,8 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--reference", nargs="+", metavar="DIR", default=None,
                    help="a reference group: data of subjects without the effects in question, "
                    "measured with the same protocol (subject folders, or a folder of them; at "
-                   "least 4). The subject is compared with the group, the model gives only the "
-                   "shape of each candidate (see ehm_drake.gap.reference)")
+                   "least 4, 16 recommended). The subject is compared with the group, the "
+                   "model gives only the shape of each candidate (see ehm_drake.gap.reference)")
     p.add_argument("--no-discrepancy", action="store_true",
                    help="leave out the model-form discrepancy (an unexplained gap stays "
                    "unexplained instead of being tested as a structural one)")
@@ -91,7 +91,7 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--references", type=int_at_least(0), default=0, metavar="K",
                    help="make a reference group of K subjects without effects (same body and "
                    "protocol, their own seeds) and diagnose every trial against it "
-                   "(diagnose --reference); default 0: no reference group")
+                   "(diagnose --reference); default 0: no reference group; 16 recommended")
     p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
@@ -128,6 +128,8 @@ def cmd_diagnose(args) -> int:
     for e in r["ranking"][:3]:
         print(f"  {e['effect']:24s} dBIC {e['delta_bic']:10.1f}  held-out reduction "
               f"{100 * e['gap_reduction_heldout']:5.1f}%")
+    if (r.get("reference") or {}).get("caution"):
+        print(f"  caution: {r['reference']['caution']}")
     mf = r.get("model_form")
     if mf:
         print(f"  model-form gap (model refit to the reference group vs the group): RMS log "

@@ -18,6 +18,17 @@ from .localize import Rows
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.
 MIN_SUBJECTS = 4
+#: Subjects a reference group should have; below it the report carries a
+#: caution (`reference.group_size_caution`).  Each candidate's threshold
+#: rests on K leave-one-out values, and those are heavy-tailed (most near
+#: 0, one subject in 8-16 far above): with 8 the same candidate's threshold
+#: varied tenfold from one group to the next.  Measured on `lumped` (stop
+#: 45, `bench/rescore_blind.py --reference`): the same stored blind trials
+#: diagnosed against their run's 8 subjects and against those 8 plus 8 of
+#: another run of the same protocol: an effect named on 7 of 42 no-effect
+#: subjects against 8, on 2 against 16; hidden effects found in 35 of 51
+#: trials against 43 (README, "A group of 16").
+RECOMMENDED_SUBJECTS = 16
 #: Bins of the running mean of the group's variance per channel (a variance
 #: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).
 VARIANCE_SMOOTHING_BINS = 5

@@ -125,6 +125,7 @@ def markdown(rep: dict, figures: list[str]) -> str:
     ref, mf = rep.get("reference"), rep.get("model_form")
     if ref and mf:
         lines += [f"## Reference group ({ref['size']} subjects)", "",
+                  *([f"**Caution:** {ref['caution']}.", ""] if ref.get("caution") else []),
                   "The subject is compared with the group; the model, refit to the group mean "
                   "(re-linearized), gives the shape of each candidate. A candidate is named "
                   "when its evidence -- its held-out chi^2 gain plus, for an effect that "
@@ -181,11 +182,13 @@ def markdown(rep: dict, figures: list[str]) -> str:
               f"Held-out sets ({m.get('folds')}): {', '.join(m.get('heldout_sets', []))}. "
               f"Significance: {m.get('significance')}; model floor "
               f"{m.get('model_floor')}. " + (
-                  f"Explained when a candidate's held-out chi^2 gain exceeds the upper "
-                  f"prediction bound of the gains it reaches on the reference group's own "
+                  f"Explained when a candidate's evidence (held-out chi^2 gain plus "
+                  f"level-difference gain) exceeds the upper "
+                  f"prediction bound of the evidence it reaches on the reference group's own "
                   f"subjects (leave one out; Student t, family-wise alpha "
                   f"{m.get('null_alpha')} over the candidates) and {m.get('min_gain')}; the "
-                  f"largest such gain is named; ambiguous when another named one comes within "
+                  f"candidate furthest beyond its threshold is named; ambiguous when another "
+                  f"named one comes within "
                   f"{_pct(m.get('ambiguity_margin'))} of its held-out share."
                   if m.get("design") == "reference group" else
                   f"Explained when the best candidate lowers the held-out chi^2 by more than "
