@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -574,6 +575,21 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
     assert 0.4 * level < np.mean(g[:, 8] > thr) < 1.6 * level
 
 
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def _null_calibration_bench():
+    """`bench/null_calibration.py`, imported (it is a script, not a module of
+    the package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "null_calibration", DATA.parent.parent / "bench" / "null_calibration.py")
+    nc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(nc)
+    return nc
+
+
 def test_null_threshold_level_on_measured_no_effect_subjects():
     """68 no-effect `lumped` subjects of five blind runs (seeds 2041,
     2043-2046, each against its run's group of 8; stored by
@@ -586,17 +602,10 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     tried at stop 44: the cube-root gains clipped at -MIN_GAIN instead of 0
     name at most half as many (4 of 68), but found 30 of 51 effects on the
     fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
-    import importlib.util
-    from pathlib import Path
-
     from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
-    here = Path(__file__).resolve().parent
-    spec = importlib.util.spec_from_file_location(
-        "null_calibration", here.parent / "bench" / "null_calibration.py")
-    nc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(nc)
-    data = json.loads((here / "data" / "lumped_null_evidence.json").read_text())
+    nc = _null_calibration_bench()
+    data = json.loads((DATA / "lumped_null_evidence.json").read_text())
     assert sum(len(e["evidence"]) for e in data.values()) == 68
     level = FAMILY_ALPHA / 8
     now = nc.exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
@@ -619,18 +628,11 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     (0.48 times the nominal level; at most the nominal level asserted, and
     not by refusing every effect).  What `group.RECOMMENDED_SUBJECTS` rests
     on, with the hits (README, "A group of 16")."""
-    import importlib.util
-    from pathlib import Path
-
     from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
 
-    here = Path(__file__).resolve().parent
-    spec = importlib.util.spec_from_file_location(
-        "null_calibration", here.parent / "bench" / "null_calibration.py")
-    nc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(nc)
-    k8 = json.loads((here / "data" / "lumped_null_evidence.json").read_text())
-    k16 = json.loads((here / "data" / "lumped_null_evidence_k16.json").read_text())
+    nc = _null_calibration_bench()
+    k8 = json.loads((DATA / "lumped_null_evidence.json").read_text())
+    k16 = json.loads((DATA / "lumped_null_evidence_k16.json").read_text())
     common = sorted(set(k8) & set(k16))
     assert len(common) >= 2
     for run in common:  # the same subjects, in the same order

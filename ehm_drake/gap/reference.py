@@ -413,8 +413,9 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     say = Progress("diagnose", enabled=progress).say
     say(f"reference group of {group.size} subjects, {len(group.rows)} rows, "
         f"{len(group.tests)} tests; {len(names)} candidates")
-    if group_size_caution(group.size):
-        say("caution: " + group_size_caution(group.size))
+    caution = group_size_caution(group.size)
+    if caution:
+        say(f"caution: {caution}")
     base_names = [f.name for f in resolve_free("default")]
 
     t0 = time.perf_counter()
