@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     from ehm_drake.gap.blind import score, summarize
-    from ehm_drake.gap.diagnose import diagnose, load_lab_data
+    from ehm_drake.gap.diagnose import DiagnosisError, diagnose, load_lab_data
     from ehm_drake.gap.group import load_reference
     from ehm_drake.gap.reference import diagnose_with_reference, rethreshold
     from ehm_drake.realities import MODEL_REALITY
@@ -70,7 +70,10 @@ def main(argv=None) -> int:
     if args.reference and args.rethreshold:
         p.error("--reference re-diagnoses; it cannot be combined with --rethreshold")
     if args.reference:
-        group = load_reference(args.reference)
+        try:
+            group = load_reference(args.reference)
+        except (FileNotFoundError, DiagnosisError) as e:
+            p.error(f"--reference: {e}")
     else:
         group = (load_reference([args.run / "reference"])
                  if settings.get("references") and not args.rethreshold else None)
