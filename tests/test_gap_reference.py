@@ -94,6 +94,11 @@ def test_protocol_checks():
     other = _lab(lambda f, lv, ch: np.ones(len(f), complex), tests=(("x", 0.3), ("x", 0.6)))
     with pytest.raises(DiagnosisError, match="one protocol"):
         ReferenceGroup.from_labs([*labs, other])
+    # A subject given twice (a folder and a link to it): its data twice
+    # would narrow the scatter; an error naming both.
+    twice = LabData(None, labs[2].rows, labs[2].tests, "link_to_s2")
+    with pytest.raises(DiagnosisError, match="link_to_s2 holds the same data as s2"):
+        ReferenceGroup.from_labs([*labs, twice])
     # A subject with a zero gain: a clear error before any model work.
     from ehm_drake.gap.reference import diagnose_with_reference
     bad = _lab(lambda f, lv, ch: np.where(f > 6, 0.0, 1.0) + 0j, name="bad")

@@ -128,6 +128,15 @@ class ReferenceGroup:
                 raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in "
                                      "the reference data")
             logs.append(np.log(H))
+        seen = {}
+        for lab, x in zip(labs, logs, strict=True):
+            digest = hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()
+            if digest in seen:
+                raise DiagnosisError(
+                    f"{lab.source} holds the same data as {seen[digest]}: a subject listed "
+                    "twice (e.g. a folder and a link to it) would narrow the group's scatter; "
+                    "give each subject once")
+            seen[digest] = lab.source
         pivot = logs[0]
         rel = np.array([wrap_log(x - pivot) for x in logs])
         mean_rel = rel.mean(axis=0)
