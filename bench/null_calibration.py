@@ -48,20 +48,26 @@ def collect(runs) -> dict:
             rep = json.loads(rep_path.read_text())
             if rep.get("method", {}).get("design") != "reference group":
                 raise SystemExit(f"{rep_path}: not a diagnosis against a reference group")
-            names = rep["method"]["candidates"]
-            by = {e["effect"]: e for e in rep["ranking"]}
-            if entry is None:
-                entry = {"candidates": names,
-                         "null_gains": {n: by[n]["null_gains"] for n in names},
-                         "borrowed_spread": rep["method"].get("borrowed_null_spread"),
-                         "evidence": []}
-            elif any(by[n]["null_gains"] != entry["null_gains"][n] for n in names):
-                raise SystemExit(f"{rf.parent}: another group's null gains in one run")
-            entry["evidence"].append([by[n]["evidence"] for n in names])
+            entry = _add_subject(entry, rep["method"]["candidates"], rep["ranking"],
+                                 rep["method"].get("borrowed_null_spread"), rf.parent)
         if entry is None:
             raise SystemExit(f"{run}: no diagnosed no-effect trial against a reference group")
         out[run.name] = entry
     return out
+
+
+def _add_subject(entry, names, ranking, borrowed, where):
+    """`entry` (a new one when None) with one no-effect subject's evidence
+    per candidate in `names` added; the run's null gains are taken from its
+    first subject and must be the same for every other (one group per run)."""
+    by = {e["effect"]: e for e in ranking}
+    if entry is None:
+        entry = {"candidates": names, "null_gains": {n: by[n]["null_gains"] for n in names},
+                 "borrowed_spread": borrowed, "evidence": []}
+    elif any(by[n]["null_gains"] != entry["null_gains"][n] for n in names):
+        raise SystemExit(f"{where}: another group's null gains in one run")
+    entry["evidence"].append([by[n]["evidence"] for n in names])
+    return entry
 
 
 def _collect_rescored(path: Path) -> dict:
@@ -72,17 +78,11 @@ def _collect_rescored(path: Path) -> dict:
     for t in json.loads(path.read_text())["trials"]:
         if "skipped" in t or t["hidden"]:
             continue
-        by = {e["effect"]: e for e in t["ranking"]}
-        names = sorted(by)
-        if any(by[n].get("null_gains") is None for n in names):
+        if any(e.get("null_gains") is None for e in t["ranking"]):
             raise SystemExit(f"{path}: trial {t['trial']} has no null gains (rescored before "
                              "rescore_blind.py kept them)")
-        if entry is None:
-            entry = {"candidates": names, "null_gains": {n: by[n]["null_gains"] for n in names},
-                     "borrowed_spread": t.get("borrowed_null_spread"), "evidence": []}
-        elif any(by[n]["null_gains"] != entry["null_gains"][n] for n in names):
-            raise SystemExit(f"{path}: another group's null gains in one run")
-        entry["evidence"].append([by[n]["evidence"] for n in names])
+        entry = _add_subject(entry, sorted(e["effect"] for e in t["ranking"]), t["ranking"],
+                             t.get("borrowed_null_spread"), path)
     if entry is None:
         raise SystemExit(f"{path}: no rescored no-effect trial")
     return entry
