@@ -22,7 +22,17 @@ chi^2 on rows where the anchor itself differs from the group mean by more
 than a factor of 2 (|log H_anchor - mean log H| > ln 2, gain and phase as
 one complex number), where the model's form is most in doubt.
 
+"Reach": the share of the reality's effect that lies in the span of the
+model's first-order changes at the anchor, that is of everything a fit of
+the model's parameters could absorb to first order: the base parameters'
+directions (`--span`, the fit registry's groups or names; default the
+diagnosis' 20), and those with the candidate's signatures added (mean over
+the trials of |P s_r|^2 / |s_r|^2, P the real least-squares projection).
+What lies outside acts through structure the model does not have; no
+signature this model computes can name it, whatever its form.
+
     python bench/effect_atlas.py /work/runs/spine5_s2038 [--out atlas.json]
+        [--reference DIR ...] [--span passive,pid,his,contact,restraints]
 
 Families and the anchor come from the diagnosis' caches (the run's
 diagnoses made them); without them they are built (minutes).
@@ -50,7 +60,7 @@ from ehm_drake.gap.models import STRENGTH_PATH, Candidate
 from ehm_drake.gap.reference import _Scorer
 from ehm_drake.identification.parameters import resolve_free
 from ehm_drake.model.anthropometry import REFERENCE
-from ehm_drake.params import load_params
+from ehm_drake.params import ParameterError, load_params
 
 SHOWN_STRENGTH = 0.7
 
@@ -76,6 +86,44 @@ def cos2(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sum((np.conj(a) * b).real)) ** 2 / (na * nb)
 
 
+#: The step of each base parameter's first-order direction (its
+#: coordinate, the log of its scale): small enough that log H is linear in
+#: it (the families are linear in the parameters), large enough to stay
+#: clear of rounding.
+REACH_STEP = 0.02
+
+
+def _real(z: np.ndarray) -> np.ndarray:
+    """A complex vector as the real one of its real and imaginary parts (the
+    real inner product the diagnosis' fits use)."""
+    return np.concatenate([z.real, z.imag], axis=0)
+
+
+def base_directions(scorer: _Scorer, w: np.ndarray) -> np.ndarray:
+    """Whitened first-order change of log H per base parameter at the
+    anchor (one real column each)."""
+    pred = scorer._predictor(Candidate(()))
+    cols = []
+    for i in range(len(scorer.base_names)):
+        theta = scorer.theta0.copy()
+        theta[i] = REACH_STEP
+        pred.update_statistics(theta)
+        cols.append(_real(wrap_log(np.log(pred.predict(theta)) - scorer.log0) * w)
+                    / REACH_STEP)
+    return np.stack(cols, axis=1)
+
+
+def span_share(basis: np.ndarray, s: np.ndarray) -> float:
+    """Share of |s|^2 (s complex, whitened) in the real span of `basis`."""
+    y = _real(s)
+    ny = float(y @ y)
+    if not ny > 0:
+        return 0.0
+    coef, *_ = np.linalg.lstsq(basis, y, rcond=None)
+    fit = basis @ coef
+    return float(fit @ fit) / ny
+
+
 def _xyz(by_dir: dict) -> str:
     return "/".join(f"{100 * by_dir.get(k, 0.0):.0f}" for k in "xyz")
 
@@ -89,13 +137,25 @@ def main() -> None:
     ap.add_argument("run", type=Path)
     ap.add_argument("--out", type=Path)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--reference", type=Path, nargs="+", default=None,
+                    help="the reference group's folders (default: the run's reference/); "
+                         "e.g. the run's and another run's, for a larger group")
+    ap.add_argument("--span", default="default",
+                    help="the base parameters whose first-order directions the reach "
+                         "spans: groups or names of the fit registry (default: the "
+                         "diagnosis' 20)")
     args = ap.parse_args()
-    if not (args.run / "reference").is_dir():
+    refs = args.reference or [args.run / "reference"]
+    if args.reference is None and not refs[0].is_dir():
         raise SystemExit(f"{args.run}: no reference group (reference/); the atlas needs a "
-                         "finished `ehm-drake blind --reality NAME --references K` run")
-
+                         "finished `ehm-drake blind --reality NAME --references K` run "
+                         "(or --reference)")
     try:
-        group = load_reference([args.run / "reference"])
+        span = [f.name for f in resolve_free(args.span)]
+    except ParameterError as e:
+        raise SystemExit(f"--span: {e}") from None
+    try:
+        group = load_reference(refs)
     except DiagnosisError as e:
         raise SystemExit(str(e)) from None
     rows = group.rows
@@ -125,6 +185,9 @@ def main() -> None:
     params = load_params()
     names = [n for n in candidate_names(None) if n in truth]
     base_names = [f.name for f in resolve_free("default")]
+    # (The anchor is the diagnosis' own, refit on its 20 parameters; the
+    # span's directions are taken there, whatever --span frees.)
+    base_names = [*base_names, *(n for n in span if n not in base_names)]
     anchor = fit_anchor(group, params, REFERENCE, workers=args.workers, progress=None,
                         use_cache=True)
     families = load_families(anchor["params"], REFERENCE, names, base_names, args.workers,
@@ -134,13 +197,17 @@ def main() -> None:
 
     # Rows where the anchor misses the group by more than a factor of 2.
     on_gap = np.abs(wrap_log(scorer.log0 - group.mean_log)) > np.log(2.0)
+    index = {n: i for i, n in enumerate(base_names)}
+    basis = base_directions(scorer, w)[:, [index[n] for n in span]]
     print(f"the anchor differs from the group mean by more than a factor 2 on "
           f"{100 * on_gap.mean():.0f}% of the rows")
     table = {}
     print(f"{args.run.name}: effect, trials; the reality's chi^2 and shares x/y/z; the EHM "
           f"candidate's at strength {SHOWN_STRENGTH}; the reality's effect along the "
           "candidate (mean cos^2, best strength); the shares of the reality's and the "
-          "candidate's chi^2 on rows where the anchor misses the group by more than 2x")
+          "candidate's chi^2 on rows where the anchor misses the group by more than 2x; "
+          f"reach: the share of the reality's effect in the span of the {len(span)} base "
+          "parameters' first-order directions, and with the candidate's signatures")
     for name in names:
         cand = Candidate(tuple(name.split("+")))
         sig, refresh, lo, hi = scorer.signature_fn(cand)
@@ -160,6 +227,9 @@ def main() -> None:
         c_chi = np.abs(sigs[SHOWN_STRENGTH]) ** 2
         c_tot, c_dir, c_top = shares(c_chi, directions, channels)
         along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
+        with_cand = np.hstack([basis, np.stack([_real(v) for v in sigs.values()], axis=1)])
+        reach = (float(np.mean([span_share(basis, s) for s in truth[name]])),
+                 float(np.mean([span_share(with_cand, s) for s in truth[name]])))
         r_gap = float(r_chi[on_gap].sum() / r_tot) if r_tot > 0 else 0.0
         # (None: no signature at that strength, e.g. a separation whose pads
         # stay in contact, a level-dependent friction at the anchor.)
@@ -169,11 +239,14 @@ def main() -> None:
                        "candidate": {"strength": SHOWN_STRENGTH, "chi2": c_tot,
                                      "directions": c_dir, "channels": c_top},
                        "along_candidate": along,
-                       "on_anchor_gap": {"reality": r_gap, "candidate": c_gap}}
+                       "on_anchor_gap": {"reality": r_gap, "candidate": c_gap},
+                       "reach": {"span": span, "base": reach[0],
+                                 "with_candidate": reach[1]}}
         print(f"  {name:22s} {len(truth[name])}  reality {r_tot:8.0f} ({_xyz(r_dir)}; "
               f"{_top2(r_top)})  candidate {c_tot:8.0f} ({_xyz(c_dir)}; {_top2(c_top)})  "
               f"along {along:.2f}  on gap {100 * r_gap:.0f}%/"
-              f"{'-' if c_gap is None else f'{100 * c_gap:.0f}%'}")
+              f"{'-' if c_gap is None else f'{100 * c_gap:.0f}%'}  "
+              f"reach {reach[0]:.2f}/{reach[1]:.2f}")
     if args.out:
         args.out.write_text(json.dumps(table, indent=1) + "\n")
 

@@ -583,16 +583,36 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
 DATA = Path(__file__).resolve().parent / "data"
 
 
-def _null_calibration_bench():
-    """`bench/null_calibration.py`, imported (it is a script, not a module of
-    the package)."""
+def _bench(name: str):
+    """`bench/{name}.py`, imported (a script, not a module of the package)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
-        "null_calibration", DATA.parent.parent / "bench" / "null_calibration.py")
-    nc = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(nc)
-    return nc
+        name, DATA.parent.parent / "bench" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_effect_atlas_reach_is_the_share_in_the_span():
+    """`bench/effect_atlas.py`'s reach: the share of a complex (whitened)
+    effect in the real span of the model's first-order directions; 1 inside
+    the span, 0 orthogonal to it, the squared cosine between."""
+    atlas = _bench("effect_atlas")
+    rng = np.random.default_rng(3)
+    n = 200
+    b1, b2 = (rng.normal(size=n) + 1j * rng.normal(size=n) for _ in range(2))
+    basis = np.stack([atlas._real(b1), atlas._real(b2)], axis=1)
+    assert atlas.span_share(basis, 2.0 * b1 - 0.5 * b2) == pytest.approx(1.0, abs=1e-12)
+    # A part orthogonal to the span (the real inner product) adds to |s|^2 only.
+    q, _ = np.linalg.qr(np.hstack([basis, atlas._real(rng.normal(size=n) + 0j)[:, None]]))
+    out = q[:n, 2] + 1j * q[n:, 2]
+    assert atlas.span_share(basis, out) == pytest.approx(0.0, abs=1e-12)
+    inside = q[:n, 0] + 1j * q[n:, 0]
+    assert atlas.span_share(basis, 3.0 * inside + 1.0 * out) == pytest.approx(0.9, abs=1e-12)
+    # i times a direction is not in its real span (gain and phase differ).
+    assert atlas.span_share(basis[:, :1], 1j * b1) < 0.2
+    assert atlas.span_share(basis, np.zeros(n, complex)) == 0.0
 
 
 def test_null_threshold_level_on_measured_no_effect_subjects():
@@ -609,7 +629,7 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
     from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
-    nc = _null_calibration_bench()
+    nc = _bench("null_calibration")
     data = json.loads((DATA / "lumped_null_evidence.json").read_text())
     assert sum(len(e["evidence"]) for e in data.values()) == 68
     level = FAMILY_ALPHA / 8
@@ -635,7 +655,7 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     on, with the hits (README, "A group of 16")."""
     from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
 
-    nc = _null_calibration_bench()
+    nc = _bench("null_calibration")
     k8 = json.loads((DATA / "lumped_null_evidence.json").read_text())
     k16 = json.loads((DATA / "lumped_null_evidence_k16.json").read_text())
     common = sorted(set(k8) & set(k16))
