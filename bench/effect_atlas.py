@@ -99,12 +99,12 @@ def _real(z: np.ndarray) -> np.ndarray:
     return np.concatenate([z.real, z.imag], axis=0)
 
 
-def base_directions(scorer: _Scorer, w: np.ndarray) -> np.ndarray:
-    """Whitened first-order change of log H per base parameter at the
-    anchor (one real column each)."""
+def base_directions(scorer: _Scorer, w: np.ndarray, names) -> np.ndarray:
+    """Whitened first-order change of log H at the anchor per base
+    parameter in `names` (one real column each, in that order)."""
     pred = scorer._predictor(Candidate(()))
     cols = []
-    for i in range(len(scorer.base_names)):
+    for i in (scorer.base_names.index(n) for n in names):
         theta = scorer.theta0.copy()
         theta[i] = REACH_STEP
         pred.update_statistics(theta)
@@ -156,8 +156,8 @@ def main() -> None:
         raise SystemExit(f"--span: {e}") from None
     try:
         group = load_reference(refs)
-    except DiagnosisError as e:
-        raise SystemExit(str(e)) from None
+    except (FileNotFoundError, DiagnosisError) as e:
+        raise SystemExit(f"--reference: {e}" if args.reference else str(e)) from None
     rows = group.rows
     w = 1.0 / np.sqrt(np.maximum(group.variance, 1e-12))
     directions = np.asarray(rows.direction).astype(str)
@@ -197,8 +197,7 @@ def main() -> None:
 
     # Rows where the anchor misses the group by more than a factor of 2.
     on_gap = np.abs(wrap_log(scorer.log0 - group.mean_log)) > np.log(2.0)
-    index = {n: i for i, n in enumerate(base_names)}
-    basis = base_directions(scorer, w)[:, [index[n] for n in span]]
+    basis = base_directions(scorer, w, span)
     print(f"the anchor differs from the group mean by more than a factor 2 on "
           f"{100 * on_gap.mean():.0f}% of the rows")
     table = {}
