@@ -119,6 +119,54 @@ def test_scaled_body(params, mass, stature):
         body.landmarks["scapula_angle_skin"][2])
 
 
+@pytest.mark.parametrize("variant, measures", [
+    ("default", REFERENCE), ("no-integrator", REFERENCE),
+    ("default", BodyMeasures(mass_kg=55.0, stature_m=1.55, sitting_height_m=0.82)),
+    ("default", BodyMeasures(mass_kg=100.0, stature_m=1.92, sitting_height_m=1.00))])
+def test_the_seat_is_touched_inside_its_parts_faces(params, variant, measures):
+    """The seat's contact surfaces are half-spaces through its parts'
+    faces (`sdf_writer.seat_sdf`): the same surface as the parts' boxes
+    only while each body ellipsoid touches its part inside the face.  At
+    rest every contact point lies at least 3 cm inside its face's edges
+    (measured 40-169 mm; the closest, the lower back on its 10 cm pad,
+    within 10 mm of the pad's middle), far beyond the millimetres the body
+    moves in vibration; and each contact is against the half-space of its
+    part, with the ellipsoid's exact penetration."""
+    from pydrake.geometry import HalfSpace
+
+    from ehm_drake.diagram import build_diagram
+    from ehm_drake.model.restraints import SEAT_PARTS
+    from ehm_drake.simulation import static_equilibrium
+
+    model = build_diagram(params, measures, variant=variant, guard=False, seat_forces=False)
+    ctx, _ = static_equilibrium(model)
+    pc = model.plant_context(ctx)
+    inspector = model.hp.scene_graph.model_inspector()
+    boxes = model.hp.body.seat.boxes
+    assert all(isinstance(inspector.GetShape(gid), HalfSpace)
+               for gid in model.hp.seat_geometries.values())
+    results = model.plant.get_contact_results_output_port().Eval(pc)
+    touched = set()
+    for i in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(i)
+        body = inspector.GetName(info.point_pair().id_A).split("::")[-1]
+        part = inspector.GetName(info.point_pair().id_B).split("::")[-1]
+        centre, size = boxes[part]
+        normal = SEAT_PARTS[part][0]
+        on_face = normal == 0
+        p = info.contact_point()
+        margin = np.min(size[on_face] / 2 - np.abs(p[on_face] - centre[on_face]))
+        assert margin > 0.03, (body, part, margin)
+        # On the face's plane: Drake puts the point between the two
+        # surfaces in the ratio of their stiffnesses, the seat's 1e10 N/m
+        # against the body's ~1e5 (depth x 1e-5, under 1e-7 m).
+        face = centre @ normal + 0.5 * size @ normal
+        assert abs(p @ normal - face) < 1e-6, (body, p)
+        touched.add(body)
+    # Every ellipsoid touches (the no-integrator body leaves its upper pad).
+    assert len(touched) == (6 if variant == "no-integrator" else 7), touched
+
+
 @pytest.mark.parametrize("measures,match", [
     (BodyMeasures(75.3, 176.0), "centimetres"),
     (BodyMeasures(0.075, 1.76), "outside"),

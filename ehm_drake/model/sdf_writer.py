@@ -18,6 +18,7 @@ import numpy as np
 
 from ..params import CARDAN_JOINTS
 from .anthropometry import REFERENCE, Body, build_body
+from .restraints import SEAT_PARTS
 
 HUMAN_MODEL_NAME = "ehm_human"
 SEAT_MODEL_NAME = "ehm_seat"
@@ -323,10 +324,20 @@ def seat_sdf(body: Body, cushion_mass_kg: float = 0.0) -> str:
     for name, (c, size) in body.seat.boxes.items():
         color = PAD_COLOR if "pad" in name else SEAT_COLOR
         target = cushion if (name == "pan" and cushion_mass_kg > 0) else lines
+        # The contact surface is the box's face towards the body as a
+        # half-space (SDFormat plane; its size is the face's, for the
+        # reader: Drake's half-space is unbounded).  The body's contact
+        # ellipsoids touch the faces well inside their edges in every
+        # posture, where the two are the same surface; the half-space's
+        # penetration is exact and cheaper than the box's (FCL's GJK/EPA):
+        # a 5 ms step 2.5% less, a 1 ms step 4% (README "Speed").
+        normal = SEAT_PARTS[name][0]
+        face = np.asarray(c, float) + 0.5 * (np.asarray(size, float) @ normal) * normal
         target += [
             f'    <collision name="{name}">',
-            f"      <pose>{_pose(c)}</pose>",
-            f"      <geometry><box><size>{_vec(size)}</size></box></geometry>",
+            f"      <pose>{_pose(face)}</pose>",
+            f"      <geometry><plane><normal>{_vec(normal)}</normal>"
+            f"<size>{_vec(np.asarray(size, float)[normal == 0])}</size></plane></geometry>",
             "    </collision>",
             f'    <visual name="{name}_visual">',
             f"      <pose>{_pose(c)}</pose>",
