@@ -19,7 +19,8 @@ half the cost per step.
 `build_diagram(params, ...)` returns an `EhmDiagram` holding the Diagram and
 handles to every subsystem.  Without a signal, the diagram exports the
 input ports ``seat_acceleration`` and ``seat_displacement`` (3 each) so it
-can be driven or linearized; with one, a `SeatExcitation` drives them.
+can be driven or linearized; with one, the signal's samples drive them
+(`ehm_drake.systems.excitation`).
 Exported outputs: ``channels`` (30), ``seat_forces`` (12), ``state``
 (plant [q; v]), ``joint_torques`` (24 gimbal torques of the PID),
 ``his_torque`` (3), ``seat_acceleration``, ``seat_displacement``,
@@ -59,7 +60,7 @@ from .model.plant import (
 )
 from .params import IMPLICIT_TIME_STEP_S, ModelParams, apply_variant, validate
 from .signals import SeatSignal
-from .systems.excitation import SeatExcitation
+from .systems.excitation import add_seat_excitation
 from .systems.forces import ForceLaws
 from .systems.his import HeadInSpace
 from .systems.joints import JointPid, PassiveJoints
@@ -197,10 +198,8 @@ def build_diagram(
     if signal is not None:
         if abs(signal.time_step - h) > 1e-12:
             raise ValueError(f"signal time step {signal.time_step} differs from the model's {h}")
-        exc = builder.AddNamedSystem("seat_excitation", SeatExcitation(signal))
-        accel_out = exc.GetOutputPort("seat_acceleration")
-        disp_out = exc.GetOutputPort("seat_displacement")
-        sys["seat_excitation"] = exc
+        motion = add_seat_excitation(builder, signal)
+        accel_out, disp_out = motion["seat_acceleration"], motion["seat_displacement"]
     else:
         a_in = builder.AddNamedSystem("seat_acceleration_input", PassThrough(3))
         d_in = builder.AddNamedSystem("seat_displacement_input", PassThrough(3))

@@ -44,7 +44,10 @@ class SeatSignal:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
-        a = np.asarray(self.acceleration, float)
+        # (+ 0.0: a new array, without negative zeros, which the excitation's
+        # zero-order hold would turn positive: what the plant reads and
+        # what is logged are then the same bits.)
+        a = np.asarray(self.acceleration, float) + 0.0
         if a.ndim != 2 or a.shape[1] != 3:
             raise SignalError(f"seat acceleration must have shape (N, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):

@@ -381,8 +381,9 @@ def test_the_explicit_contact_damper_acts_where_sap_touches(variant):
     applies it at the contact point, and `ForceLaws`: its explicit half acts
     at the ellipsoid's deepest point, on the line of Drake's contact point
     along the normal (only the tangential position sets a normal force's
-    moment; measured 0.003-0.53 mm off it, the accuracy of Drake's
-    ellipsoid penetration query), not at the restraint's body-fixed point,
+    moment; measured 0.002-0.48 mm off it against the seat's half-spaces,
+    0.003-0.53 mm against its boxes before stop 48), not at the restraint's
+    body-fixed point,
     which the body's rotation carries off it (0.5-3.8 mm in the default
     posture, 1.6-24 mm where the no-integrator posture turns trunk and
     legs).  Until stop

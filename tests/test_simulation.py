@@ -145,6 +145,36 @@ def test_a_signal_played_at_another_step_keeps_its_samples():
             at_time_step(sig, bad)
 
 
+@pytest.mark.parametrize("h", [0.001, 0.005])
+def test_the_excitation_plays_the_sample_of_each_step_bit_for_bit(h):
+    """The excitation (C++ zero-order hold) gives, at every time the
+    simulator steps to from the settle time and at every sample time,
+    sample floor(t/h + 1e-6) of the signal with its bits (no negative
+    zero: a seat at rest before the onset reads +0)."""
+    from pydrake.systems.framework import DiagramBuilder
+
+    from ehm_drake.systems.excitation import OUTPUTS, add_seat_excitation
+
+    sig = make_seat_signal("random", "xyz", 0.3, 2.5, 7, h, 0.5, 0.5)
+    assert not np.any((sig.acceleration == 0) & np.signbit(sig.acceleration))
+    builder = DiagramBuilder()
+    ports = add_seat_excitation(builder, sig)
+    for name in OUTPUTS:
+        builder.ExportOutput(ports[name], name)
+    diagram = builder.Build()
+    ctx = diagram.CreateDefaultContext()
+    n_run = int(round((sig.duration - sig.settle_time) / h))
+    times = [sig.settle_time + i * h for i in range(n_run + 1)] + list(sig.times)
+    data = {"seat_acceleration": sig.acceleration, "seat_velocity": sig.velocity,
+            "seat_displacement": sig.displacement}
+    for t in times:
+        ctx.SetTime(t)
+        k = sig.sample_index(t)
+        for name in OUTPUTS:
+            assert diagram.GetOutputPort(name).Eval(ctx).tobytes() == data[name][k].tobytes(), \
+                (name, t, k)
+
+
 def test_body_feels_the_seat_motion_exactly(params):
     """A rigid body away from the seat falls freely in the inertial frame,
     whatever the seat does: its absolute motion is exactly the discrete free
@@ -159,7 +189,10 @@ def test_body_feels_the_seat_motion_exactly(params):
     plant, pctx = model.plant, model.plant_context(ctx)
     q = plant.GetPositions(pctx)
     free = plant.GetJointByName("pelvis_free")
-    q[free.position_start() + 5] += 20.0  # far above the seat: no contact
+    # Far above the seat and in front of its backrest: clear of every seat
+    # surface (half-spaces through the parts' faces), no contact.
+    q[free.position_start() + 5] += 20.0
+    q[free.position_start() + 3] += 1.0
     plant.SetPositions(pctx, q)
     for j in plant.GetJointIndices(model.hp.human):
         joint = plant.get_joint(j)

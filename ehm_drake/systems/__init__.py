@@ -1,5 +1,6 @@
 """LeafSystems of the model: joints (passive, PID), head-in-space, seat
-(inertial load, shear restraints), excitation, measurements.
+(inertial load, shear restraints), measurements; and the excitation, which
+is built from Drake's C++ primitives (`excitation.add_seat_excitation`).
 
 Conventions shared by the systems here:
 
