@@ -276,7 +276,20 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
     for block in ("normal_cubic_stiffness", "normal_linear_stiffness", "normal_linear_damping"):
         restraint_block(about_reference, block)[:] = 0.0
     prm.SetFromVector(about_reference)
-    x = solve(x)
+    try:
+        x0 = x.copy()
+        x = solve(x)
+    except EquilibriumError:
+        # The SDF's pose has the body just touching the pan and floor, its
+        # weight on nothing: the first Jacobian has no vertical stiffness,
+        # and its least-squares step can take the body off the seat, where
+        # the next ones find no support either (on the implicit design at
+        # 7-8 ms steps, against the seat's half-spaces).  Start again with
+        # the body lowered 5 mm into the seat, about its static compression.
+        x = x0
+        x[ps.start + plant.GetJointByName("pelvis_free").position_start() + 5] -= 0.005
+        jac[0] = None
+        x = solve(x)
     if seat_in and len(pad_z):
         # Seating-in: anchor the pads' vertical restraints where the back is,
         # re-solve, until the anchors stop moving (a contraction: the pads'

@@ -39,7 +39,6 @@ names none.
 
 from __future__ import annotations
 
-import logging
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -116,20 +115,6 @@ NOMINAL_LOAD_SHARE = {
 #: the seat is very stiff and each body ellipsoid's stiffness is raised so the
 #: pair's combined stiffness is exactly its parameter value.
 SEAT_POINT_STIFFNESS = 1e10
-
-
-class _NoDeformableHalfSpaceNote(logging.Filter):
-    """Drops Drake's note that rigid half-spaces take no part in deformable
-    contact, logged when a context of a scene with half-spaces is made: the
-    seat's contact surfaces are half-spaces (`sdf_writer.seat_sdf`) and the
-    model has no deformable body.  Every other Drake message passes."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith(
-            "Rigid (non-deformable) half spaces are not currently supported for deformable")
-
-
-logging.getLogger("drake").addFilter(_NoDeformableHalfSpaceNote())
 
 
 def model_directory() -> Path:

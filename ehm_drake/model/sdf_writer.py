@@ -9,6 +9,7 @@ damping, gains and contact properties come from the parameter file.
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 from pathlib import Path
@@ -295,6 +296,20 @@ def human_sdf(body: Body, cardan_joints=()) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+class _NoDeformableHalfSpaceNote(logging.Filter):
+    """Drops Drake's note that rigid half-spaces take no part in deformable
+    contact, logged when a context of a scene with half-spaces is made: the
+    seat's contact surfaces are half-spaces (`seat_sdf`) and the
+    model has no deformable body.  Every other Drake message passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(
+            "Rigid (non-deformable) half spaces are not currently supported for deformable")
+
+
+logging.getLogger("drake").addFilter(_NoDeformableHalfSpaceNote())
 
 
 def seat_sdf(body: Body, cushion_mass_kg: float = 0.0) -> str:
