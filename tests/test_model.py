@@ -130,8 +130,8 @@ def test_the_seat_is_touched_inside_its_parts_faces(params, variant, measures):
     rest every contact point lies at least 3 cm inside its face's edges
     (measured 40-169 mm; the closest, the lower back on its 10 cm pad,
     within 10 mm of the pad's middle), far beyond the millimetres the body
-    moves in vibration; and each contact is against the half-space of its
-    part, with the ellipsoid's exact penetration."""
+    moves in vibration; and each seat part is a half-space, touched on its
+    face's plane."""
     from pydrake.geometry import HalfSpace
 
     from ehm_drake.diagram import build_diagram
