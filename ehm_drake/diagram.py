@@ -95,6 +95,34 @@ class LoggedOutput:
         return _LogRows(self.sink.FindLog(root_context), self.rows)
 
 
+class DerivedChannelsLog:
+    """The ``channels`` log, derived after the run from the logged plant
+    state and seat displacement by the body-channels system itself
+    (`BodyChannels.channels_of_log`, the same bits as logging its output):
+    `FindLog(root_context)` as `LoggedOutput`'s."""
+
+    def __init__(self, channels, state: LoggedOutput, displacement: LoggedOutput):
+        self.channels, self.state, self.displacement = channels, state, displacement
+
+    def FindLog(self, root_context):  # noqa: N802  (Drake's name)
+        return _DerivedRows(self, root_context)
+
+
+class _DerivedRows:
+    def __init__(self, derived: DerivedChannelsLog, root_context):
+        self._state = derived.state.FindLog(root_context)
+        d = derived.displacement.FindLog(root_context).data()
+        system = derived.channels
+        self._data = system.channels_of_log(system.GetMyContextFromRoot(root_context),
+                                            self._state.data(), d)
+
+    def sample_times(self) -> np.ndarray:
+        return self._state.sample_times()
+
+    def data(self) -> np.ndarray:
+        return self._data
+
+
 class _LogRows:
     def __init__(self, log, rows: slice):
         self._log, self._rows = log, rows
@@ -168,9 +196,10 @@ def build_diagram(
     measures : anthropometry of the body (default: 50th-percentile male).
     signal : seat excitation to play; None exports the seat input ports.
     variant : "default", "no-integrator" or "high-stiffness".
-    log_period : if given, one VectorLogSink records the channels, seat
-        motion, seat forces, torques and plant state at this period (s);
-        `EhmDiagram.loggers` gives each output's rows (`LoggedOutput`).
+    log_period : if given, one VectorLogSink records the seat motion, seat
+        forces, torques and plant state at this period (s);
+        `EhmDiagram.loggers` gives each output's rows (`LoggedOutput`), and
+        the channels derived from the logged state (`DerivedChannelsLog`).
     guard : add the `DivergenceGuard` (blow-up detection).
     seat_forces : add the `SeatForces` measurement (contact results: a
         second contact solve per evaluation; linearizations that only need
@@ -282,8 +311,10 @@ def build_diagram(
     loggers = {}
     if log_period is not None:
         # One sink for all of them (a Multiplexer in front): every sink is a
-        # publish event per period, about 20 us each at a 5 ms step.
-        names = [n for n in ("channels", "seat_forces", "joint_torques", "his_torque",
+        # publish event per period, about 20 us each at a 5 ms step.  The
+        # channels are not logged: they are derived from the logged state
+        # and seat displacement after the run (`DerivedChannelsLog`).
+        names = [n for n in ("seat_forces", "joint_torques", "his_torque",
                              "seat_acceleration", "seat_displacement", "state") if n in outputs]
         sizes = [outputs[n].size() for n in names]
         mux = builder.AddNamedSystem("logged_outputs", Multiplexer(sizes))
@@ -294,6 +325,8 @@ def build_diagram(
         offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
         loggers = {name: LoggedOutput(sink, slice(offsets[i], offsets[i + 1]))
                    for i, name in enumerate(names)}
+        loggers["channels"] = DerivedChannelsLog(channels, loggers["state"],
+                                                 loggers["seat_displacement"])
     diagram = builder.Build()
     diagram.set_name("ehm_seated_human")
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)

@@ -219,6 +219,44 @@ def test_body_feels_the_seat_motion_exactly(params):
     assert np.max(np.abs(d)) > 0.01
 
 
+def test_channels_derived_from_the_logged_state_are_the_output_ports_bits(params,
+                                                                        settled_default):
+    """`vibrate` logs the plant state and derives the body channels from it
+    after the run (`DerivedChannelsLog`): at every logged sample of a
+    vibrating run they are, bit for bit, what the ``channels`` output
+    port gives at that time (read by a monitor at every step)."""
+    from ehm_drake.simulation import set_normal_reference
+
+    s = params.simulation
+    sig = make_seat_signal("random", "xyz", 0.5, s.settle_time_s + 0.4, 5, s.time_step_s,
+                           s.settle_time_s, s.settle_time_s)
+    model = build_diagram(params, signal=sig, log_period=s.time_step_s)
+    ctx = model.diagram.CreateDefaultContext()
+    StateMap(model).set(ctx, settled_default.state)
+    set_normal_reference(model, ctx)
+    ctx.SetTime(sig.settle_time)
+    ch = model.systems["body_channels"]
+    x = model.plant.GetPositionsAndVelocities(model.plant_context(ctx))
+    ch.GetMyMutableContextFromRoot(ctx).get_mutable_numeric_parameter(
+        ch.settled_pose_parameter_index).SetFromVector(ch.settled_pose_vector(x))
+    port = model.diagram.GetOutputPort("channels")
+    seen = {}
+
+    def monitor(context):
+        seen[round(context.get_time() / s.time_step_s)] = port.Eval(context).copy()
+
+    sim = Simulator(model.diagram, ctx)
+    sim.set_monitor(monitor)
+    sim.Initialize()
+    sim.AdvanceTo(sig.duration)
+    log = model.loggers["channels"].FindLog(ctx)
+    t, y = log.sample_times(), log.data()
+    assert y.shape == (30, len(t)) and len(t) > 50
+    assert np.ptp(y[2]) > 1e-4  # the pelvis moved: a real comparison
+    for k, tk in enumerate(t):
+        assert y[:, k].tobytes() == seen[round(tk / s.time_step_s)].tobytes(), tk
+
+
 def _run(params, settled, direction, seed, duration=4.0, rms=0.5):
     s = params.simulation
     sig = make_seat_signal("random", direction, rms, duration, seed, s.time_step_s,
