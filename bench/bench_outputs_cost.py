@@ -15,7 +15,7 @@ wall time more than CPU time), one core.  Variants:
 - ``no seat forces``: the same without `SeatForces` (whose contact results
   trigger the SAP solve that the step then reuses);
 - ``no log``: nothing recorded (the divergence guard still checks the
-  state every 10 ms);
+  state every 50 ms, `DivergenceGuard.PERIOD_S`);
 - ``bare``: no log, no seat forces, no divergence guard: the plant, the
   force laws and the excitation alone.
 """
