@@ -405,13 +405,22 @@ def _write_csv(path: Path, names, data) -> None:
 
 
 def _advance(simulator: Simulator, t_end: float, progress: Progress | None,
-             chunk: float = 0.25) -> None:
+             guard=None, chunk: float = 0.25) -> None:
     """Advance in chunks, updating the progress display between chunks (a
-    Ctrl-C lands between or inside chunks and propagates to the caller)."""
+    Ctrl-C lands between or inside chunks and propagates to the caller).
+    When a time step fails inside Drake, the model's divergence `guard`
+    (if any) checks the last completed state: a blow-up that grew past
+    Drake's solvers between two of its checks is reported as
+    `SimulationDiverged` too (`DivergenceGuard.check_after_failure`)."""
     t0 = t = simulator.get_context().get_time()
     while t < t_end - 1e-12:
         t = min(t + chunk, t_end)
-        simulator.AdvanceTo(t)
+        try:
+            simulator.AdvanceTo(t)
+        except RuntimeError as e:
+            if guard is not None and not isinstance(e, SimulationDiverged):
+                guard.check_after_failure(simulator.get_context(), e)
+            raise
         if progress is not None:
             progress.update(t - t0)
 
@@ -499,7 +508,7 @@ def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
     start = posture_summary(model, vctx)
     simulator = _simulator(model, vctx)
     prog = Progress(f"settle ({variant})", T, progress) if progress else None
-    _advance(simulator, T, prog)
+    _advance(simulator, T, prog, model.systems.get("divergence_guard"))
     summary = posture_summary(model, vctx)
     summary["head_pitch_drift_deg"] = summary["head_pitch_deg"] - start["head_pitch_deg"]
     summary["settle_time_s"] = T
@@ -545,7 +554,7 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
     wall0 = time.perf_counter()
     interrupted = False
     try:
-        _advance(simulator, signal.duration, prog)
+        _advance(simulator, signal.duration, prog, model.systems.get("divergence_guard"))
     except KeyboardInterrupt:
         interrupted = True
     # The wall time includes reading the logs: the channels are derived

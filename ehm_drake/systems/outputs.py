@@ -280,6 +280,18 @@ class DivergenceGuard(LeafSystem):
                 worst, worst_speed = body.name(), speed
         return worst
 
+    def check_after_failure(self, root_context, error: Exception) -> None:
+        """A time step failed inside Drake (`error`, e.g. SAP's solve on a
+        state gone to 1e100 between two checks): when the last completed
+        state already shows a divergence, raise `SimulationDiverged`
+        naming when, where and why, with Drake's message; otherwise return
+        (the caller re-raises `error`: not a blow-up this guard sees)."""
+        try:
+            self._check(self.GetMyContextFromRoot(root_context))
+        except SimulationDiverged as e:
+            raise SimulationDiverged(e.time, e.body, f"{e.reason}; the next time step failed "
+                                     f"in Drake: {error}") from error
+
     def _check(self, context):
         x = self._state.Eval(context)
         t = context.get_time()
