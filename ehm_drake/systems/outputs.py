@@ -235,9 +235,10 @@ class DivergenceGuard(LeafSystem):
     #: Check period (s): 20 Hz, a whole number of every allowed step (each
     #: divides the 5 ms output period).  An instability grows by a factor
     #: per step, so from the < 1 J of vibration it passes the 50 J threshold
-    #: within a few checks, long before it overflows to inf (the NaN check
-    #: catches that too); a posture lost (joint range, pelvis through the
-    #: pan) is reported within 50 ms.  Checking every 10 ms cost ~3% of a
+    #: within a few checks; one so fast that Drake's solver fails before a
+    #: check is reported from the last completed state
+    #: (`check_after_failure`); a posture lost (joint range, pelvis through
+    #: the pan) is reported within 50 ms.  Checking every 10 ms cost ~3% of a
     #: 5 ms step's time in a run (stop 49: 570-580 -> 555-564 us per step).
     PERIOD_S = 0.05
 
