@@ -31,8 +31,21 @@ the trials of |P s_r|^2 / |s_r|^2, P the real least-squares projection).
 What lies outside acts through structure the model does not have; no
 signature this model computes can name it, whatever its form.
 
+"Delay parts" (`--delay-parts`, for `reflex_delay` trials): could another
+delay in the model follow the reality's?  The signatures of a delay of 10,
+20 and 30 ms on one part of the model's cut-open feedback at a time (the
+head-in-space controller, the neck, spine or leg PIDs' proportional paths,
+all of the feedback as the candidate delays it), and of a reflex loop the
+model does not have: the PIDs' proportional paths again, through a 30 ms
+delay and a 40 ms first-order activation (Winters & Stark 1985), as
+stiffness and as rate feedback (two directions, to first order in its
+gain).  Per part: its chi^2 at the three delays, its share along the
+reality's effect (mean best cos^2) and the reach of the base directions
+with its signatures added.
+
     python bench/effect_atlas.py /work/runs/spine5_s2038 [--out atlas.json]
         [--reference DIR ...] [--span passive,pid,his,contact,restraints]
+        [--delay-parts]
 
 Families and the anchor come from the diagnosis' caches (the run's
 diagnoses made them); without them they are built (minutes).
@@ -55,12 +68,13 @@ from ehm_drake.gap.diagnose import (
     load_lab_data,
     separation_slope,
 )
+from ehm_drake.gap.family import linearize_cut
 from ehm_drake.gap.group import load_reference, wrap_log
 from ehm_drake.gap.models import STRENGTH_PATH, Candidate
 from ehm_drake.gap.reference import _Scorer
 from ehm_drake.identification.parameters import resolve_free
 from ehm_drake.model.anthropometry import REFERENCE
-from ehm_drake.params import ParameterError, load_params
+from ehm_drake.params import ParameterError, load_params, params_from_dict
 
 SHOWN_STRENGTH = 0.7
 
@@ -124,6 +138,129 @@ def span_share(basis: np.ndarray, s: np.ndarray) -> float:
     return float(fit @ fit) / ny
 
 
+def _zero_gains(section: str, groups, gains=("kp",)):
+    def off(d: dict) -> None:
+        for g in groups:
+            block = d[section] if g is None else d[section][g]
+            for k in gains:
+                block[k] = [0.0] * len(block[k])
+    return off
+
+
+#: The parts of the model's feedback a delay can act on (`--delay-parts`),
+#: each as the change of the parameter dict that switches it off.  (Only
+#: the proportional paths run through the cut-open feedback: the PIDs'
+#: derivative is the plant's joint damping, their integral a state.)
+FEEDBACK_PARTS = {
+    "head_in_space": _zero_gains("his", [None], ("kp", "kd")),
+    "neck_pid": _zero_gains("pid", ["neck"]),
+    "spine_pid": _zero_gains("pid", ["spine"]),
+    "leg_pids": _zero_gains("pid", ["hips", "knees", "ankles"]),
+}
+PID_PARTS = ("neck_pid", "spine_pid", "leg_pids")
+#: Delays of the parts' signatures (s).
+PART_DELAYS_S = (0.01, 0.02, 0.03)
+#: The reflex loop of `--delay-parts`: transport delay and activation time
+#: constant (s; short-latency stretch reflexes 20-40 ms, excitation-
+#: contraction 20-60 ms), and the gain of its first-order directions (a
+#: share of the PIDs' proportional gains: small enough for first order).
+REFLEX_DELAY_S, REFLEX_ACTIVATION_S, REFLEX_GAIN = 0.03, 0.04, 0.01
+
+
+def feedback_parts(params) -> tuple[dict, int]:
+    """The cut-open feedback Bw K of the model at `params` split by part
+    (`FEEDBACK_PARTS`: what switching each off removes from it; "all": the
+    whole, as `reflex_delay` delays it), and the size of those matrices."""
+    full = linearize_cut(params)
+    BwK = full.Bw @ full.K
+    parts = {}
+    for name, off in FEEDBACK_PARTS.items():
+        d = params.to_dict()
+        off(d)
+        lin = linearize_cut(params_from_dict(d))
+        if lin.A.shape != full.A.shape:
+            raise RuntimeError(f"switching {name} off changed the model's states")
+        parts[name] = BwK - lin.Bw @ lin.K
+    parts["all"] = BwK
+    return parts, full.A.shape[0]
+
+
+def loop_response(A, Bu, Bw, C, K, h: float, freqs_hz, inputs, rows, loops) -> np.ndarray:
+    """H = C (zI - A - Bw K - sum_k g_k(f) M_k)^-1 Bu[:, inputs] at z = exp(j
+    2 pi f h), shape (nf, ny, len(inputs)): the closed loop with extra
+    feedback terms, `loops` = [(M_k, g_k)], M_k a square matrix acting on
+    the leading states (a part of Bw K delayed by d: g = exp(-j w d) - 1; a
+    loop the model lacks: its own transfer function)."""
+    f = np.asarray(freqs_hz, float)
+    z = np.exp(2j * np.pi * f * h)
+    n = A.shape[0]
+    L0 = A + Bw @ K
+    Ms = []
+    for M, g in loops:
+        Mp = np.zeros((n, n))
+        Mp[:M.shape[0], :M.shape[1]] = M
+        Ms.append((Mp, g))
+    Cr, Bj = C[rows], Bu[:, inputs].astype(complex)
+    out = np.empty((len(f), Cr.shape[0], len(inputs)), complex)
+    for k in range(len(f)):
+        L = L0 + sum(g(f[k], z[k]) * M for M, g in Ms)
+        out[k] = Cr @ np.linalg.solve(z[k] * np.eye(n) - L, Bj)
+    return out
+
+
+def delay_of(d_s: float):
+    return lambda f, z: np.exp(-2j * np.pi * f * d_s) - 1.0
+
+
+def reflex_path(rate: bool, h: float):
+    """The reflex loop's transfer from the joint angle error (or its
+    backward-difference rate) to its share of the PID's torque."""
+    def g(f, z):
+        c = REFLEX_GAIN * np.exp(-2j * np.pi * f * REFLEX_DELAY_S) / (
+            1.0 + 2j * np.pi * f * REFLEX_ACTIVATION_S)
+        return c * (1.0 - 1.0 / z) / h if rate else c
+    return g
+
+
+def delay_part_table(scorer: _Scorer, params, w, basis, truths) -> dict:
+    """`--delay-parts`: per part of the feedback (and the reflex loop) its
+    chi^2, share along the reality's effect and reach (module docstring)."""
+    parts, _ = feedback_parts(params)
+    pred = scorer._predictor(Candidate(()))
+    pred.update_statistics(scorer.theta0)
+    h = pred.family.h
+    loops = []
+
+    def with_loops(mats, coords, freqs, inputs, rows):  # the base model plus `loops`
+        return loop_response(*mats, h, freqs, inputs, rows, loops)
+
+    pred._response = with_loops
+
+    def signature(new_loops, scale: float = 1.0) -> np.ndarray:
+        loops[:] = new_loops
+        log_h = np.log(pred.predict(scorer.theta0))
+        loops.clear()
+        return wrap_log(log_h - scorer.log0) * w / scale
+
+    out = {}
+    for name, M in parts.items():
+        sigs = [signature([(M, delay_of(d))]) for d in PART_DELAYS_S]
+        out[name] = {"chi2": [float(np.sum(np.abs(v) ** 2)) for v in sigs],
+                     "along": float(np.mean([max(cos2(s, v) for v in sigs) for s in truths])),
+                     "reach": float(np.mean([span_share(
+                         np.hstack([basis, np.stack([_real(v) for v in sigs], axis=1)]), s)
+                         for s in truths]))}
+    pid = sum(parts[p] for p in PID_PARTS)
+    sigs = [signature([(pid, reflex_path(rate, h))], REFLEX_GAIN) for rate in (False, True)]
+    out["reflex_loop"] = {
+        "chi2": [float(np.sum(np.abs(v * REFLEX_GAIN) ** 2)) for v in sigs],
+        "along": float(np.mean([max(cos2(s, v) for v in sigs) for s in truths])),
+        "reach": float(np.mean([span_share(
+            np.hstack([basis, np.stack([_real(v) for v in sigs], axis=1)]), s)
+            for s in truths]))}
+    return out
+
+
 def _xyz(by_dir: dict) -> str:
     return "/".join(f"{100 * by_dir.get(k, 0.0):.0f}" for k in "xyz")
 
@@ -144,6 +281,9 @@ def main() -> None:
                     help="the base parameters whose first-order directions the reach "
                          "spans: groups or names of the fit registry (default: the "
                          "diagnosis' 20)")
+    ap.add_argument("--delay-parts", action="store_true",
+                    help="for reflex_delay trials: a delay on each part of the model's "
+                         "feedback, and a reflex loop it lacks (module docstring)")
     args = ap.parse_args()
     refs = args.reference or [args.run / "reference"]
     if args.reference is None and not refs[0].is_dir():
@@ -246,6 +386,19 @@ def main() -> None:
               f"along {along:.2f}  on gap {100 * r_gap:.0f}%/"
               f"{'-' if c_gap is None else f'{100 * c_gap:.0f}%'}  "
               f"reach {reach[0]:.2f}/{reach[1]:.2f}")
+    if args.delay_parts and "reflex_delay" in truth:
+        parts = delay_part_table(scorer, anchor["params"], w, basis, truth["reflex_delay"])
+        print("reflex_delay: a delay of 10/20/30 ms on one part of the model's feedback (chi^2 "
+              "of its signature at each; the reality's effect along it, mean best cos^2; "
+              "reach with the base directions), and the reflex loop it lacks (stiffness and "
+              f"rate paths, {1e3 * REFLEX_DELAY_S:g} ms delay, {1e3 * REFLEX_ACTIVATION_S:g} "
+              f"ms activation; chi^2 at {100 * REFLEX_GAIN:g}% of the PIDs' gains)")
+        for name, v in parts.items():
+            print(f"  {name:14s} chi^2 {' / '.join(f'{c:.3g}' for c in v['chi2'])}  "
+                  f"along {v['along']:.2f}  reach {v['reach']:.2f}")
+        table["reflex_delay"]["delay_parts"] = parts
+    elif args.delay_parts:
+        print("--delay-parts: no reflex_delay trial in this run")
     if args.out:
         args.out.write_text(json.dumps(table, indent=1) + "\n")
 

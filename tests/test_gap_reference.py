@@ -23,6 +23,7 @@ from ehm_drake.gap.group import MIN_SUBJECTS, ReferenceGroup, level_pairs
 from ehm_drake.gap.localize import Rows, band_index
 from ehm_drake.gap.models import TestInput as _TestInput
 from ehm_drake.gap.reference import profile_nuisance
+from ehm_drake.params import load_params
 
 
 def _lab(H_of_row, tests=(("z", 0.3), ("z", 0.6)), name="s"):
@@ -613,6 +614,63 @@ def test_effect_atlas_reach_is_the_share_in_the_span():
     # i times a direction is not in its real span (gain and phase differ).
     assert atlas.span_share(basis[:, :1], 1j * b1) < 0.2
     assert atlas.span_share(basis, np.zeros(n, complex)) == 0.0
+
+
+def test_effect_atlas_loop_response_is_the_delayed_closed_loop():
+    """`bench/effect_atlas.py --delay-parts`: the closed loop with extra
+    feedback terms.  The whole feedback Bw K delayed by d steps (g = exp(-j
+    w d h) - 1) is `family.response` with that delay (its Woodbury form);
+    no extra term is the undelayed loop; a part and its rest delayed alike
+    are the whole delayed."""
+    from ehm_drake.gap.family import response
+
+    atlas = _bench("effect_atlas")
+    rng = np.random.default_rng(5)
+    n, m, h = 12, 4, 1e-3
+    A = np.diag(rng.uniform(0.5, 0.95, n)) + 0.02 * rng.normal(size=(n, n))
+    Bu, Bw, C = rng.normal(size=(n, 3)), 0.05 * rng.normal(size=(n, m)), rng.normal(size=(5, n))
+    K = rng.normal(size=(m, n))
+    f = np.linspace(0.5, 12.0, 7)
+    rows = np.array([0, 2, 4])
+    for d in (0, 3, 30):
+        ref = response(A, Bu, Bw, C, K, h, f, [0, 2], rows=rows, delay_steps=d)
+        loops = [(Bw @ K, atlas.delay_of(d * h))] if d else []
+        got = atlas.loop_response(A, Bu, Bw, C, K, h, f, [0, 2], rows, loops)
+        assert np.allclose(got, ref, rtol=1e-9, atol=1e-12)
+        K1 = K.copy()
+        K1[:2] = 0.0
+        split = [(Bw @ K1, atlas.delay_of(d * h)), (Bw @ (K - K1), atlas.delay_of(d * h))]
+        assert np.allclose(atlas.loop_response(A, Bu, Bw, C, K, h, f, [0, 2], rows, split),
+                           ref, rtol=1e-9, atol=1e-12)
+    # A delay on a part only differs from the whole delayed.
+    part = atlas.loop_response(A, Bu, Bw, C, K, h, f, [0], rows,
+                               [(Bw @ K1, atlas.delay_of(30 * h))])
+    whole = response(A, Bu, Bw, C, K, h, f, [0], rows=rows, delay_steps=30)
+    assert not np.allclose(part, whole, rtol=1e-3)
+
+
+def test_effect_atlas_feedback_parts_add_up_to_the_cut_feedback():
+    """The parts of the model's cut-open feedback (`--delay-parts`): the
+    head-in-space controller and the PIDs' proportional paths are all of
+    the feedback's action on the body; the rest of Bw K is the integrals'
+    input (h e on the integral states, whatever the gains)."""
+    from ehm_drake.gap.family import linearize_cut
+
+    atlas = _bench("effect_atlas")
+    params = load_params()
+    parts, n = atlas.feedback_parts(params)
+    lin = linearize_cut(params)
+    plant = np.array([s.startswith("plant:") for s in lin.state_names])
+    integral = np.array([s.startswith("joint_pid:") for s in lin.state_names])
+    assert plant.sum() == 62 and integral.sum() == 24 and n == len(plant)
+    total = sum(parts[p] for p in atlas.FEEDBACK_PARTS)
+    scale = np.abs(parts["all"][plant]).max()
+    assert np.abs(total[plant] - parts["all"][plant]).max() < 1e-6 * scale
+    assert np.abs(total[integral]).max() < 1e-9 * scale
+    # Each part acts (neck and head-in-space on the head's joints, ...).
+    assert all(np.abs(parts[p][plant]).max() > 1e-3 * scale for p in atlas.FEEDBACK_PARTS)
+    e = parts["all"][integral] / lin.h  # the angle errors the integrals read
+    assert np.allclose(np.sort(np.abs(e).sum(axis=1)), 1.0)
 
 
 def test_null_threshold_level_on_measured_no_effect_subjects():
