@@ -138,6 +138,15 @@ def span_share(basis: np.ndarray, s: np.ndarray) -> float:
     return float(fit @ fit) / ny
 
 
+def along_and_reach(basis: np.ndarray, sigs, truths) -> tuple[float, float]:
+    """Mean over the reality's effects `truths` of their best cos^2 along
+    one of the signatures `sigs`, and of their share in the span of
+    `basis` with the signatures added (whitened, complex)."""
+    along = float(np.mean([max(cos2(s, v) for v in sigs) for s in truths]))
+    with_sigs = np.hstack([basis, np.stack([_real(v) for v in sigs], axis=1)])
+    return along, float(np.mean([span_share(with_sigs, s) for s in truths]))
+
+
 def _zero_gains(section: str, groups, gains=("kp",)):
     def off(d: dict) -> None:
         for g in groups:
@@ -167,10 +176,10 @@ PART_DELAYS_S = (0.01, 0.02, 0.03)
 REFLEX_DELAY_S, REFLEX_ACTIVATION_S, REFLEX_GAIN = 0.03, 0.04, 0.01
 
 
-def feedback_parts(params) -> tuple[dict, int]:
+def feedback_parts(params) -> dict:
     """The cut-open feedback Bw K of the model at `params` split by part
     (`FEEDBACK_PARTS`: what switching each off removes from it; "all": the
-    whole, as `reflex_delay` delays it), and the size of those matrices."""
+    whole, as `reflex_delay` delays it)."""
     full = linearize_cut(params)
     BwK = full.Bw @ full.K
     parts = {}
@@ -182,7 +191,7 @@ def feedback_parts(params) -> tuple[dict, int]:
             raise RuntimeError(f"switching {name} off changed the model's states")
         parts[name] = BwK - lin.Bw @ lin.K
     parts["all"] = BwK
-    return parts, full.A.shape[0]
+    return parts
 
 
 def loop_response(A, Bu, Bw, C, K, h: float, freqs_hz, inputs, rows, loops) -> np.ndarray:
@@ -225,7 +234,7 @@ def reflex_path(rate: bool, h: float):
 def delay_part_table(scorer: _Scorer, params, w, basis, truths) -> dict:
     """`--delay-parts`: per part of the feedback (and the reflex loop) its
     chi^2, share along the reality's effect and reach (module docstring)."""
-    parts, _ = feedback_parts(params)
+    parts = feedback_parts(params)
     pred = scorer._predictor(Candidate(()))
     pred.update_statistics(scorer.theta0)
     h = pred.family.h
@@ -242,22 +251,16 @@ def delay_part_table(scorer: _Scorer, params, w, basis, truths) -> dict:
         loops.clear()
         return wrap_log(log_h - scorer.log0) * w / scale
 
-    out = {}
-    for name, M in parts.items():
-        sigs = [signature([(M, delay_of(d))]) for d in PART_DELAYS_S]
-        out[name] = {"chi2": [float(np.sum(np.abs(v) ** 2)) for v in sigs],
-                     "along": float(np.mean([max(cos2(s, v) for v in sigs) for s in truths])),
-                     "reach": float(np.mean([span_share(
-                         np.hstack([basis, np.stack([_real(v) for v in sigs], axis=1)]), s)
-                         for s in truths]))}
+    def entry(sigs, chi2_scale: float = 1.0) -> dict:
+        along, reach = along_and_reach(basis, sigs, truths)
+        return {"chi2": [float(np.sum(np.abs(v * chi2_scale) ** 2)) for v in sigs],
+                "along": along, "reach": reach}
+
+    out = {name: entry([signature([(M, delay_of(d))]) for d in PART_DELAYS_S])
+           for name, M in parts.items()}
     pid = sum(parts[p] for p in PID_PARTS)
-    sigs = [signature([(pid, reflex_path(rate, h))], REFLEX_GAIN) for rate in (False, True)]
-    out["reflex_loop"] = {
-        "chi2": [float(np.sum(np.abs(v * REFLEX_GAIN) ** 2)) for v in sigs],
-        "along": float(np.mean([max(cos2(s, v) for v in sigs) for s in truths])),
-        "reach": float(np.mean([span_share(
-            np.hstack([basis, np.stack([_real(v) for v in sigs], axis=1)]), s)
-            for s in truths]))}
+    out["reflex_loop"] = entry([signature([(pid, reflex_path(rate, h))], REFLEX_GAIN)
+                                for rate in (False, True)], REFLEX_GAIN)
     return out
 
 
@@ -365,10 +368,8 @@ def main() -> None:
         r_tot, r_dir, r_top = shares(r_chi, directions, channels)
         c_chi = np.abs(sigs[SHOWN_STRENGTH]) ** 2
         c_tot, c_dir, c_top = shares(c_chi, directions, channels)
-        along = float(np.mean([max(cos2(s, v) for v in sigs.values()) for s in truth[name]]))
-        with_cand = np.hstack([basis, np.stack([_real(v) for v in sigs.values()], axis=1)])
-        reach = (float(np.mean([span_share(basis, s) for s in truth[name]])),
-                 float(np.mean([span_share(with_cand, s) for s in truth[name]])))
+        along, with_cand = along_and_reach(basis, list(sigs.values()), truth[name])
+        reach = (float(np.mean([span_share(basis, s) for s in truth[name]])), with_cand)
         r_gap = float(r_chi[on_gap].sum() / r_tot) if r_tot > 0 else 0.0
         # (None: no signature at that strength, e.g. a separation whose pads
         # stay in contact, a level-dependent friction at the anchor.)
@@ -394,7 +395,8 @@ def main() -> None:
               f"rate paths, {1e3 * REFLEX_DELAY_S:g} ms delay, {1e3 * REFLEX_ACTIVATION_S:g} "
               f"ms activation; chi^2 at {100 * REFLEX_GAIN:g}% of the PIDs' gains)")
         for name, v in parts.items():
-            print(f"  {name:14s} chi^2 {' / '.join(f'{c:.3g}' for c in v['chi2'])}  "
+            chi2 = " / ".join(f"{c:,.0f}" if c >= 100 else f"{c:.3g}" for c in v["chi2"])
+            print(f"  {name:14s} chi^2 {chi2}  "
                   f"along {v['along']:.2f}  reach {v['reach']:.2f}")
         table["reflex_delay"]["delay_parts"] = parts
     elif args.delay_parts:
