@@ -6,7 +6,8 @@ name no effect that is not there (the issue's false-alarm assertion).
 Vertical tests at two levels, 30 s records, three candidates (as the
 own-family short run in test_gap_blind.py).  Seed 21 draws a no-effect trial
 first, then seat_foam_stiffening.  The top-1/top-3 figures on realities are
-not asserted: the README reports them (see "Independent realities"); on
+not asserted: the README reports them ("Independent realities"; every run in
+docs/gap_diagnosis_realities.md); on
 today's method the hidden effect is not found beyond the model-form gap.
 """
 

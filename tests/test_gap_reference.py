@@ -711,7 +711,7 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     K = 16; at K = 16 each candidate exceeds its threshold 2 times in 336
     (0.48 times the nominal level; at most the nominal level asserted, and
     not by refusing every effect).  What `group.RECOMMENDED_SUBJECTS` rests
-    on, with the hits (README, "A group of 16")."""
+    on, with the hits (docs/gap_diagnosis_realities.md, "A group of 16")."""
     from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
 
     nc = _bench("null_calibration")

@@ -23,7 +23,7 @@ plant's own configuration.  (Until stop 40 they acted on the ball joints'
 angular-velocity coordinates: the same at the reference posture, but a
 joint holding a static torque -- the integral action under the body's
 weight -- got a stiffness ~10% off in yaw and roll, and the two designs
-differed by up to 4.6% in transmissibility; see README, "Two designs".)
+differed by up to 4.6% in transmissibility; see docs/speed.md, "Two designs".)
 
 Both are `TemplateSystem`s (float, AutoDiffXd).
 """
