@@ -28,10 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli_common import UsageError, int_at_least, positive_float, prepare_output_dir
+from .cli_common import (
+    UsageError,
+    add_design_arguments,
+    int_at_least,
+    positive_float,
+    prepare_output_dir,
+)
 from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
-from .params import IMPLICIT_TIME_STEP_S, VARIANTS, ParameterError, load_params, with_design
+from .params import IMPLICIT_TIME_STEP_S, VARIANTS, ParameterError, load_params
 from .signals import KINDS, PAPER_RMS, SignalError
 from .sweep import add_sweep_arguments
 from .viz import add_viz_arguments, handle_viz
@@ -66,36 +72,24 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="sitting height (m); default scales with stature")
     p.add_argument("--contact", choices=("point", "hydroelastic"),
                    help="contact model (default: from the parameters, point)")
-    p.add_argument("--design", choices=("reference", "implicit"),
-                   help="joint design (default: from the parameters, reference): reference "
-                   "= the paper's spherical joints, feedback explicit, 1 ms step; implicit = "
-                   "Cardan joint chains, stiff feedback in the implicit solve, a step chosen by "
-                   "accuracy (5 ms; 5/3 ms for the high-stiffness variant), about "
-                   "3x faster (README \"Two designs\")")
-    p.add_argument("--time-step", type=positive_float("--time-step"), metavar="S",
-                   help="simulation time step in seconds (default: the parameters', or the "
-                   "design's own when --design changes it: reference 0.001, implicit the "
-                   "largest of 0.005 / n that keeps the model second-order accurate)")
+    add_design_arguments(p)
 
 
 def _load_model_params(args):
+    from .diagram import on_design
+
     params = load_params(args.params)
     if getattr(args, "contact", None):
         params.contact.model = args.contact
     design, step = getattr(args, "design", None), getattr(args, "time_step", None)
-    if design is not None or step is not None:
-        switched = design is not None and design != params.simulation.design
-        params = with_design(params, design, step)
-        if switched and design == "implicit" and step is None:
-            # The design's own step, chosen by accuracy for this body and variant.
-            from .diagram import accurate_step
-
-            params = accurate_step(params, _measures(args), args.variant)
-            quiet = getattr(args, "quiet", False)
-            if params.simulation.time_step_s < IMPLICIT_TIME_STEP_S and not quiet:
-                print(f"implicit design: time step {params.simulation.time_step_s * 1e3:.3g} "
-                      f"ms, the largest that keeps the {args.variant} model second-order "
-                      "accurate (--time-step sets another)", file=sys.stderr)
+    by_accuracy = (design == "implicit" and params.simulation.design != "implicit"
+                   and step is None)
+    params = on_design(params, design, step, _measures(args), args.variant)
+    if by_accuracy and not getattr(args, "quiet", False) and \
+            params.simulation.time_step_s < IMPLICIT_TIME_STEP_S:
+        print(f"implicit design: time step {params.simulation.time_step_s * 1e3:.3g} "
+              f"ms, the largest that keeps the {args.variant} model second-order "
+              "accurate (--time-step sets another)", file=sys.stderr)
     return params
 
 

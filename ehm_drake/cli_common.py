@@ -65,6 +65,21 @@ def csv_floats(name: str):
     return parse
 
 
+def add_design_arguments(p: argparse.ArgumentParser) -> None:
+    """``--design`` and ``--time-step``: how the model's joints are built and
+    its step (resolved by `ehm_drake.diagram.on_design`)."""
+    p.add_argument("--design", choices=("reference", "implicit"),
+                   help="joint design (default: from the parameters, reference): reference "
+                   "= the paper's spherical joints, feedback explicit, 1 ms step; implicit = "
+                   "Cardan joint chains, stiff feedback in the implicit solve, a step chosen by "
+                   "accuracy (5 ms; 5/3 ms for the high-stiffness variant), about "
+                   "3x faster (README \"Two designs\")")
+    p.add_argument("--time-step", type=positive_float("--time-step"), metavar="S",
+                   help="simulation time step in seconds (default: the parameters', or the "
+                   "design's own when --design changes it: reference 0.001, implicit the "
+                   "largest of 0.005 / n that keeps the model second-order accurate)")
+
+
 def prepare_output_dir(path: str | Path, force: bool) -> Path:
     """Create the output folder; refuse a non-empty existing one unless
     `force` (then only the files this program writes are replaced)."""

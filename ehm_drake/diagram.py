@@ -58,7 +58,7 @@ from .model.plant import (
     pid_vectors,
     step_damping_limits,
 )
-from .params import IMPLICIT_TIME_STEP_S, ModelParams, apply_variant, validate
+from .params import IMPLICIT_TIME_STEP_S, ModelParams, apply_variant, validate, with_design
 from .signals import SeatSignal
 from .systems.excitation import add_seat_excitation
 from .systems.forces import ForceLaws
@@ -355,6 +355,20 @@ def accurate_step(params: ModelParams, measures: BodyMeasures = REFERENCE,
     n = max(1, math.ceil(period / min(limit, IMPLICIT_TIME_STEP_S) - 1e-9))
     p.simulation.time_step_s = period / n
     return validate(p)
+
+
+def on_design(params: ModelParams, design: str | None = None, time_step_s: float | None = None,
+              measures: BodyMeasures = REFERENCE, variant: str = "default") -> ModelParams:
+    """`params` on `design` at `time_step_s` (the command line's ``--design``
+    and ``--time-step``; None keeps the parameters').  Switching to the
+    implicit design without a step gives the step chosen by accuracy for
+    this body and variant (`accurate_step`); otherwise `params.with_design`."""
+    if design is None and time_step_s is None:
+        return params
+    switched = design is not None and design != params.simulation.design
+    if switched and design == "implicit" and time_step_s is None:
+        return accurate_step(params, measures, variant)
+    return with_design(params, design, time_step_s)
 
 
 def separate_force_systems(builder, hp: HumanPlant, params: ModelParams, h: float, accel_out,

@@ -176,3 +176,62 @@ def test_trial_fractions_that_cannot_add_up_are_refused_with_the_fix():
     spec = BlindSpec(trials=40, seed=1, p_none=1.0, p_two=0.0)
     spec.validate()
     assert all(t["effects"] == {} for t in plan(spec))
+
+
+# ---------------------------------------------------------------------------
+# The model's design: synth, blind and diagnose on the implicit design
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_a_blind_run_on_the_implicit_design_makes_and_diagnoses_its_data_there(tmp_path):
+    """`blind --design implicit`: the trial's data come from the implicit
+    design (its key says so, and a reflex delay would be a whole number of
+    its 5 ms steps), `diagnose` fits that design (the run's parameters are
+    written once and passed to it), the foam is found as on the reference
+    design, and resuming with the default model is refused."""
+    from ehm_drake.diagram import on_design
+    from ehm_drake.gap.blind import BlindError, BlindSpec, run_blind
+    from ehm_drake.params import load_params
+
+    params = on_design(load_params(), "implicit")
+    assert (params.simulation.design, params.simulation.time_step_s) == ("implicit", 0.005)
+    settings = dict(SHORT_BLIND, trials=1, p_none=0.0)
+    spec = BlindSpec(**settings, workers=2, params=params.to_dict())
+    s = run_blind(spec, tmp_path, progress=False)
+    assert s["top1"] == 1.0, s["confusion"]
+    key = json.loads((tmp_path / "keys" / "trial_000.json").read_text())
+    assert key["simulation"] == {"design": "implicit", "time_step_s": 0.005}
+    assert load_params(tmp_path / "params.json").to_dict() == params.to_dict()
+    rep = json.loads((tmp_path / "trial_000" / "diagnosis" / "report.json").read_text())
+    assert rep["params_file"] == str(tmp_path / "params.json")
+    assert rep["simulation"] == {"design": "implicit", "time_step_s": 0.005}
+    assert "the implicit design at a 5 ms step" in (tmp_path / "blind.md").read_text()
+    with pytest.raises(BlindError, match="other settings"):
+        run_blind(BlindSpec(**settings, workers=2), tmp_path, progress=False)
+
+
+def test_a_reflex_delay_is_keyed_as_the_steps_it_runs():
+    """The key holds what the simulation realizes: a 24 ms delay runs as
+    25 ms at 5 ms steps and as 24 ms at the reference design's 1 ms."""
+    from ehm_drake.gap.synth import _truth
+
+    at_5 = _truth("reflex_delay", 0.8, 0.005)
+    assert at_5["values"]["tau_s"] == pytest.approx(0.024)
+    assert at_5["realized_values"]["tau_s"] == pytest.approx(0.025)
+    assert "realized_values" not in _truth("reflex_delay", 0.8, 0.001)
+    assert "realized_values" not in _truth("seat_foam_stiffening", 1.0, 0.005)
+
+
+def test_the_model_options_are_refused_for_a_reality_s_data(tmp_path, capsys):
+    """`synth --reality lumped --design implicit`: the data come from the
+    reality, so a model option there is an error, said in one line."""
+    from ehm_drake.cli import main
+
+    rc = main(["synth", "--effect", "none", "--seed", "1", "--reality", "lumped",
+               "--design", "implicit", "--out", str(tmp_path / "d"),
+               "--key", str(tmp_path / "k.json")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "--reality lumped come from that reality's own simulation" in err
+    assert not (tmp_path / "d").exists()

@@ -346,7 +346,7 @@ def test_blind_run_records_a_diverging_reality_trial_and_goes_on(tmp_path, monke
 
     calls = []
 
-    def diverge(synth, data, key, workers):
+    def diverge(synth, data, key, workers, params=None):
         calls.append(synth.seed)
         raise RealityError("lumped: the pelvis moved 0.25 m from its seat at t = 9.186 s")
     monkeypatch.setattr(blind, "_synthesize_once", diverge)

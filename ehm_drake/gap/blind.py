@@ -88,6 +88,16 @@ class BlindSpec:
     #: scatter, their own seeds) made once for the run; every trial is then
     #: diagnosed against it (`diagnose --reference`).  0: none.
     references: int = 0
+    #: The model's parameters (`ModelParams.to_dict()`; None: the defaults):
+    #: the model that makes the data on the model itself and the one
+    #: `diagnose` fits, e.g. on the implicit design (``blind --design``).
+    params: dict | None = None
+
+    def model_params(self):
+        """The run's `ModelParams`, or None for the defaults."""
+        from ..params import params_from_dict
+
+        return None if self.params is None else params_from_dict(self.params)
 
     def validate(self) -> None:
         if self.trials < 1:
@@ -333,9 +343,11 @@ def summarize(results: list[dict], reality: str = MODEL_REALITY) -> dict:
 
 
 def _diagnose_subprocess(data: Path, out: Path, spec: BlindSpec, log: Path,
-                         reference: Path | None = None) -> int:
+                         reference: Path | None = None, params_file: Path | None = None) -> int:
     cmd = [sys.executable, "-m", "ehm_drake.cli", "diagnose", str(data), "--out", str(out),
            "--force"]
+    if params_file is not None:
+        cmd += ["--params", str(params_file)]
     if reference is not None:
         cmd += ["--reference", str(reference)]
     if spec.candidates:
@@ -355,13 +367,19 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     settings = json.loads(json.dumps(settings))
     sfile = out / "blind_settings.json"
     if sfile.is_file():
-        old = {"reality": MODEL_REALITY, "references": 0, **json.loads(sfile.read_text())}
+        old = {"reality": MODEL_REALITY, "references": 0, "params": None,
+               **json.loads(sfile.read_text())}
         if {k: v for k, v in old.items() if k != "trials"} != \
                 {k: v for k, v in settings.items() if k != "trials"}:
             raise BlindError(f"{out} holds a blind run with other settings; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
+    params = spec.model_params()
+    if params is not None:
+        # What `diagnose` loads (it runs in its own process): the run's
+        # parameters, written once next to the settings.
+        (out / "params.json").write_text(json.dumps(spec.params, indent=1) + "\n")
     trials = plan(spec)
-    reference = _reference_group(spec, out, progress) if spec.references else None
+    reference = _reference_group(spec, out, progress, params) if spec.references else None
     results = []
     prog = Progress("blind", len(trials), progress, unit="trials")
     for k, tr in enumerate(trials):
@@ -378,7 +396,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                 continue
             if "detectability" not in res:  # scored before the detectability check
                 _judge(res, data, json.loads(key.read_text()),
-                       json.loads((diag / "report.json").read_text()), spec, twin)
+                       json.loads((diag / "report.json").read_text()), spec, twin, params)
                 rfile.write_text(json.dumps(res, indent=1) + "\n")
             results.append(res)
             prog.skip()
@@ -387,7 +405,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         try:
             _synthesize_once(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
                                        spec.directions, spec.duration_s, reality=spec.reality),
-                             data, key, spec.workers)
+                             data, key, spec.workers, params)
         except RealityError as e:
             # The reality's own simulation diverged on this subject and effect:
             # no data to diagnose.  Recorded (with the reason) and left out of
@@ -399,7 +417,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             prog.step(f"trial {k + 1}: skipped, the reality diverged ({e})")
             continue
         t_synth = time.perf_counter() - t1
-        rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log", reference)
+        rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log", reference,
+                                  out / "params.json" if params is not None else None)
         if rc != 0:
             raise RuntimeError(f"diagnose failed on trial {tr['trial']} (exit {rc}); see "
                                f"{tdir / 'diagnose.log'}")
@@ -407,11 +426,12 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         key_data = json.loads(key.read_text())
         truth = key_data["effects"]
         res = {"trial": tr["trial"], "hidden": tr["effects"],
-               "truth_values": {n: v["values"] for n, v in truth.items()},
+               "truth_values": {n: v.get("realized_values", v["values"])
+                                for n, v in truth.items()},
                "fitted": {e["effect"]: e["params"] for e in report["ranking"]
                           if e["effect"] in tr["effects"]},
                "synth_s": t_synth, "diagnose_s": report.get("timing_s", {}).get("total")}
-        _judge(res, data, key_data, report, spec, twin)
+        _judge(res, data, key_data, report, spec, twin, params)
         rfile.write_text(json.dumps(res, indent=1) + "\n")
         results.append(res)
         s = res["score"]
@@ -427,7 +447,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     return summary
 
 
-def _reference_group(spec: BlindSpec, out: Path, progress: bool) -> Path:
+def _reference_group(spec: BlindSpec, out: Path, progress: bool, params=None) -> Path:
     """Make (or find) the run's reference group: `spec.references` subjects
     without effects, seeds from their own stream (never a trial's), into
     out/reference/subject_NN (keys in out/keys).  A subject on which the
@@ -445,7 +465,7 @@ def _reference_group(spec: BlindSpec, out: Path, progress: bool) -> Path:
             _synthesize_once(SynthSpec({}, seed, tuple(spec.levels), spec.directions,
                                        spec.duration_s, reality=spec.reality),
                              folder / name, out / "keys" / f"reference_{name}.json",
-                             spec.workers)
+                             spec.workers, params)
         except RealityError as e:
             prog.say(f"reference {name} (seed {seed}) skipped: {e}")
             continue
@@ -457,7 +477,8 @@ def _reference_group(spec: BlindSpec, out: Path, progress: bool) -> Path:
     return folder
 
 
-def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None) -> None:
+def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None,
+                     params=None) -> None:
     """`synthesize` into `data` and `key` unless a finished data folder is
     there (a half-written one, from an interrupted run, is redone)."""
     if (data / "frf.csv").is_file():
@@ -466,16 +487,16 @@ def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | Non
         import shutil
         shutil.rmtree(data, ignore_errors=True)
         key.unlink(missing_ok=True)
-    synthesize(synth, data, key, workers=workers, progress=False)
+    synthesize(synth, data, key, params=params, workers=workers, progress=False)
 
 
 def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
-           twin: tuple[Path, Path]) -> None:
+           twin: tuple[Path, Path], params=None) -> None:
     """Add the trial's detectability (from its key) and its score.  On an
     independent reality the twin data (the trial without its effects) are
     made here, after the diagnosis, into `twin` (folder, key file)."""
     if spec.reality == MODEL_REALITY:
-        det = detectability(data, key, workers=spec.workers)
+        det = detectability(data, key, params, workers=spec.workers)
     elif not key["effects"]:
         det = {"detectable": False, "effects": {}}
     else:
@@ -504,6 +525,7 @@ def markdown(summary: dict, results: list[dict]) -> str:
 
     def at_least(key):
         return "-" if bar.get(key) is None else f">= {_p(bar[key])}"
+    sim = (s.get("settings", {}).get("params") or {}).get("simulation")
     lines = [f"# Blind check: {s['trials']} trials ({s['effect_trials']} with hidden effects, "
              f"{s['detectable_trials']} of them detectable; {s['no_effect_trials']} without)",
              *(["", f"{len(s['skipped_trials'])} more trials skipped: the reality's "
@@ -512,6 +534,8 @@ def markdown(summary: dict, results: list[dict]) -> str:
              *(["", f"Diagnosed against a reference group of "
                 f"{s['settings']['references']} subjects (`diagnose --reference`)."]
                if s.get("settings", {}).get("references") else []),
+             *(["", f"The model: the {sim['design']} design at a "
+                f"{1e3 * sim['time_step_s']:g} ms step (`params.json`)."] if sim else []),
              "", "| metric | value | acceptance |", "|---|---|---|",
              *([f"| scored trials | {s['trials']} | >= {bar['trials']} |"]
                if bar.get("trials") else []),

@@ -7,7 +7,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..cli_common import csv_floats, int_at_least, prepare_output_dir
+from ..cli_common import (
+    UsageError,
+    add_design_arguments,
+    csv_floats,
+    int_at_least,
+    prepare_output_dir,
+)
 from ..realities import MODEL_REALITY
 from .effects import EFFECT_NAMES
 
@@ -31,6 +37,7 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--params", metavar="FILE", help="model parameters (default or a fit's "
                    "params.yaml)")
+    add_design_arguments(p)
     p.add_argument("--effects", type=_effect_list, metavar="A,B,...",
                    help=f"candidate effects (default all: {', '.join(EFFECT_NAMES)})")
     p.add_argument("--workers", type=int_at_least(1), default=None,
@@ -65,6 +72,9 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--reality", default=MODEL_REALITY, metavar="NAME",
                    help="the body that makes the data: ehm (the model itself, default) or an "
                    "independent reality (see ehm_drake.realities)")
+    p.add_argument("--params", metavar="FILE", help="the model's parameters (default or a "
+                   "fit's params.yaml); the subject scatter is applied to them")
+    add_design_arguments(p)
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--key", required=True, metavar="KEYFILE")
     p.add_argument("--quiet", action="store_true")
@@ -92,6 +102,9 @@ def add_gap_arguments(sub) -> None:
                    help="make a reference group of K subjects without effects (same body and "
                    "protocol, their own seeds) and diagnose every trial against it "
                    "(diagnose --reference); default 0: no reference group; 16 recommended")
+    p.add_argument("--params", metavar="FILE", help="the model's parameters: the model that "
+                   "makes the data (on --reality ehm) and the one diagnose fits")
+    add_design_arguments(p)
     p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
@@ -102,11 +115,12 @@ def _directions(text: str) -> str:
 
 
 def cmd_diagnose(args) -> int:
+    from ..diagram import on_design
     from ..params import load_params
     from .diagnose import diagnose
     from .report import write_report
 
-    params = load_params(args.params)
+    params = on_design(load_params(args.params), args.design, args.time_step)
     out = prepare_output_dir(args.out, args.force)
     if args.reference:
         from .reference import diagnose_with_reference
@@ -118,7 +132,9 @@ def cmd_diagnose(args) -> int:
         diag = diagnose(args.data, params, args.effects, workers=args.workers,
                         progress=not args.quiet, use_cache=not args.no_cache,
                         discrepancy=not args.no_discrepancy)
-    files = write_report(diag, out, {"params_file": args.params})
+    files = write_report(diag, out, {"params_file": args.params,
+                                     "simulation": {"design": params.simulation.design,
+                                                    "time_step_s": params.simulation.time_step_s}})
     r = diag.report
     print(f"verdict: {r['verdict']}" + (f" ({r['best_effect']})" if r["best_effect"] else ""))
     print(f"  {r['explanation']}")
@@ -147,13 +163,28 @@ def cmd_diagnose(args) -> int:
     return 0
 
 
+def _model_params(args, data_from_model: bool):
+    """The model's parameters given by ``--params``, ``--design`` and
+    ``--time-step`` (None when none of them is: the defaults)."""
+    if args.params is None and args.design is None and args.time_step is None:
+        return None
+    if not data_from_model:
+        raise UsageError(f"--params, --design and --time-step set the model; the data of "
+                         f"--reality {args.reality} come from that reality's own simulation")
+    from ..diagram import on_design
+    from ..params import load_params
+
+    return on_design(load_params(args.params), args.design, args.time_step)
+
+
 def cmd_synth(args) -> int:
     from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, parse_effects_arg, synthesize
 
     spec = SynthSpec(parse_effects_arg(args.effect, args.strength), args.seed,
                      args.levels or DEFAULT_LEVELS, _directions(args.directions),
                      args.duration or DEFAULT_DURATION_S, reality=args.reality)
-    res = synthesize(spec, args.out, args.key, workers=args.workers, progress=not args.quiet)
+    res = synthesize(spec, args.out, args.key, _model_params(args, args.reality == MODEL_REALITY),
+                     workers=args.workers, progress=not args.quiet)
     print(f"synth: {len(res.tests)} tests, {len(res.frf)} FRF rows -> {res.out_dir}; "
           f"key -> {res.key_path}")
     return 0
@@ -163,10 +194,12 @@ def cmd_blind(args) -> int:
     from .blind import BlindSpec, run_blind
     from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS
 
+    params = _model_params(args, True)
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
-                     workers=args.workers, reality=args.reality, references=args.references)
+                     workers=args.workers, reality=args.reality, references=args.references,
+                     params=None if params is None else params.to_dict())
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):
         return "n/a" if x is None else f"{100 * x:.0f}%"

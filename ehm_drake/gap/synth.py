@@ -51,7 +51,7 @@ from ..parallel import run_jobs
 from ..params import ModelParams, params_from_dict
 from ..progress import Progress
 from ..realities import CHANNEL_NAMES, MODEL_REALITY, RealityError, get_reality
-from .effects import EFFECTS, effect_values
+from .effects import EFFECTS, effect_values, reflex_delay_steps
 
 DEFAULT_LEVELS = (0.3, 0.6)
 DEFAULT_DURATION_S = 60.0
@@ -136,6 +136,20 @@ def _test_seeds(seed: int, n: int) -> list[int]:
 
 def level_label(level: float) -> str:
     return f"{level:g}"
+
+
+def _truth(name: str, strength: float, h: float) -> dict:
+    """An effect's entry in the key: its strength and values, and where
+    the simulation realizes a value other than the one drawn, the realized
+    one (a reflex delay is a whole number of time steps: at the implicit
+    design's 5 ms, 24 ms runs as 25 ms)."""
+    values = effect_values(name, strength)
+    entry = {"strength": float(strength), "values": values}
+    if "tau_s" in values:
+        tau = reflex_delay_steps(values["tau_s"], h) * h
+        if not math.isclose(tau, values["tau_s"], rel_tol=1e-9):
+            entry["realized_values"] = {**values, "tau_s": tau}
+    return entry
 
 
 def _run_test(args):
@@ -248,8 +262,10 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
         jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
                 for (d, lv), sd in zip(tests, seeds, strict=True)]
         truth = {
-            "effects": {n: {"strength": float(s), "values": effect_values(n, s)}
+            "effects": {n: _truth(n, s, subject.simulation.time_step_s)
                         for n, s in spec.effects.items() if s > 0},
+            "simulation": {"design": subject.simulation.design,
+                           "time_step_s": subject.simulation.time_step_s},
             "subject_factors": factors,
             "subject_values": {n: representative(subject, f) for n, f in
                                ((f.name, f) for f in resolve_free("default"))},
