@@ -7,8 +7,8 @@ Vertical tests at two levels, 30 s records, three candidates (as the
 own-family short run in test_gap_blind.py).  Seed 21 draws a no-effect trial
 first, then seat_foam_stiffening.  The top-1/top-3 figures on realities are
 not asserted: the README reports them ("Independent realities"; every run in
-docs/gap_diagnosis_realities.md); on
-today's method the hidden effect is not found beyond the model-form gap.
+docs/gap_diagnosis_realities.md); on today's method the hidden effect is not
+found beyond the model-form gap.
 """
 
 from __future__ import annotations
