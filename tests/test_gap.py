@@ -109,7 +109,7 @@ def test_an_effect_spread_below_every_cell_s_threshold_is_named_on_the_joint_tes
     significant cell where the candidate removed 77% and 65% of the held-out gap
     (delta BIC -728 and -632 on 12,240 rows); its no-effect and undetectable trials
     reached at most 40% (delta BIC -370).  The numbers are those trials'."""
-    from ehm_drake.gap.diagnose import decide, joint_test
+    from ehm_drake.gap.verdict import decide, joint_test
 
     rows, n_cand = 12240, 8
     thin = [_entry("visceral_mass", -728.0, 0.77), _entry("backrest_separation", -30.0, 0.01, 3)]

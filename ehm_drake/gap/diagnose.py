@@ -101,16 +101,9 @@ from .models import (
     family_specs,
     fit_candidate,
 )
+from .verdict import AMBIGUITY_MARGIN, EXPLAINED_REDUCTION, decide, explain
 
-VERDICTS = ("explained", "ambiguous", "unexplained", "no_significant_gap")
-#: The best candidate must remove this share of the held-out gap.
-EXPLAINED_REDUCTION = 0.5
-#: Candidates within this held-out reduction of the best are not separated.
-AMBIGUITY_MARGIN = 0.05
 SEPARATION_OFFSET_MM = 4.0
-#: Significance of the joint test (per candidate, Bonferroni over the candidates),
-#: the same level as the cells' test.
-JOINT_SIGNIFICANCE = 0.01
 CACHE_VERSION = "1"
 
 
@@ -614,42 +607,11 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     evidence = level_evidence(rows)
     nonlinear_evidence = any(e["significant"] for e in evidence.values())
     d = decide(len(significant), ranking, len(rows), len(names), evidence)
-    best, joint, jointly = d["best"], d["joint"], d["jointly"]
-    verdict, best_effect, ambiguous_with, experiment, explanation = \
-        d["verdict"], None, [], None, ""
-    if verdict == "no_significant_gap":
-        explanation = ("the base refit leaves no cell whose error exceeds the measurement "
-                       "uncertainty (+3% model floor) at p < 0.01 (Bonferroni)"
-                       + (f", and no candidate removes half of the held-out gap with a "
-                          f"significant improvement (best: {best['effect']}, "
-                          f"{100 * best['gap_reduction_heldout']:.0f}% of it, nominal p = "
-                          f"{joint['p_value']:.2g})" if best else ""))
-    elif verdict == "unexplained":
-        explanation = (
-            f"{len(significant)} significant cells; the best candidate "
-            + (f"({best['effect']}) removes {100 * best['gap_reduction_heldout']:.0f}% of the "
-               f"held-out gap (< {100 * EXPLAINED_REDUCTION:.0f}%)" if best else "none")
-            + ": an effect outside the candidate library")
-    else:
-        close = d["close"]
-        best_effect = best["effect"]
-        if close:
-            ambiguous_with = [r["effect"] for r in close]
-            experiment = separating_experiment(best, close[0], state)
-            explanation = (f"{best['effect']} and {', '.join(ambiguous_with)} explain the "
-                           f"held-out data equally well ({100 * best['gap_reduction_heldout']:.0f}"
-                           f"% vs {100 * close[0]['gap_reduction_heldout']:.0f}%)")
-        else:
-            explanation = (f"{best['effect']} removes {100 * best['gap_reduction_heldout']:.0f}% "
-                           f"of the held-out gap ({100 * best['gap_reduction_train']:.0f}% on the "
-                           f"fitted data)")
-        if jointly:
-            explanation = (f"no single cell exceeds the measurement uncertainty (+3% model "
-                           f"floor) at p < 0.01 (Bonferroni), but together they do: "
-                           f"{best['effect']}'s held-out chi^2 improvement "
-                           f"{joint['delta_chi2_heldout']:.0f} is significant "
-                           f"(nominal p = {joint['p_value']:.2g} against {JOINT_SIGNIFICANCE:g} / "
-                           f"{len(names)} candidates); " + explanation)
+    best, verdict = d["best"], d["verdict"]
+    experiment = separating_experiment(best, d["close"][0], state) if d["close"] else None
+    best_effect = best["effect"] if verdict in ("explained", "ambiguous") else None
+    ambiguous_with = [r["effect"] for r in d["close"]]
+    explanation = explain(d, len(significant), len(names))
     after_res = results[best["effect"]] if best else base
     cells_after = localize(rows, after_res["chi_all"])
     localization = mark_after(cells_before, cells_after)
@@ -666,7 +628,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
         "gap_after": g["after"],
         "gap_given_model": gap_value(chi2_rows(rows, _given_prediction(state)), keys),
         "significant_cells": len(significant),
-        "joint_test": joint,
+        "joint_test": d["joint"],
         "ambiguous_with": ambiguous_with,
         "separating_experiment": experiment,
         "explanation": explanation,
@@ -685,58 +647,6 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
                    "candidates": names},
     }
     return report, cells_before, cells_after
-
-
-def decide(n_significant: int, ranking: list[dict], n_rows: int, n_candidates: int,
-           evidence: dict) -> dict:
-    """The verdict from the significant cells and the candidates' ranking
-    (best first; entries as `_ranking_entry` makes them) and the level
-    evidence: `verdict`, the `best` entry, the entries `close` to it (the
-    ambiguity), the `joint` test of the best and whether the effect is named
-    on it alone (`jointly`: no cell significant)."""
-    nonlinear_evidence = any(e["significant"] for e in evidence.values())
-    best = ranking[0] if ranking else None
-    joint = joint_test(best, n_rows, n_candidates) if best else None
-    supported = best is not None and best["delta_bic"] < 0 and \
-        best["gap_reduction_heldout"] >= EXPLAINED_REDUCTION
-    jointly = not n_significant and supported and joint["significant"]
-    close = []
-    if not n_significant and not jointly:
-        verdict = "no_significant_gap"
-    elif not supported:
-        verdict = "unexplained"
-    else:
-        close = [r for r in ranking[1:] if r["delta_bic"] < 0 and
-                 best["gap_reduction_heldout"] - r["gap_reduction_heldout"] < AMBIGUITY_MARGIN]
-        # Level-dependence evidence separates a nonlinear from a linear candidate.
-        close = [r for r in close if not (
-            (nonlinear_evidence and best["level_dependent"] and not r["level_dependent"])
-            or (evidence and not nonlinear_evidence and not best["level_dependent"]
-                and r["level_dependent"]))]
-        verdict = "ambiguous" if close else "explained"
-    return {"verdict": verdict, "best": best, "close": close, "joint": joint,
-            "jointly": jointly}
-
-
-def joint_test(entry: dict, n_rows: int, n_candidates: int,
-               alpha: float = JOINT_SIGNIFICANCE) -> dict:
-    """The best candidate's held-out chi^2 improvement tested as a whole.
-
-    The cells' test looks at each (direction, segment, DoF, band) cell on its
-    own at p < alpha / cells; an effect spread over many cells can stay below
-    that in every cell.  Here the improvement of the held-out chi^2 by the
-    candidate's k parameters (the likelihood-ratio statistic of the held-out
-    rows) is compared with chi^2 on k degrees of freedom at alpha /
-    candidates (the best of n_candidates was picked).  The p-value is
-    nominal (correlated bins make it too small); `_assemble` names an effect
-    on it only together with the half of the held-out gap removed."""
-    k = max(int(entry["n_effect_params"]), 1)
-    penalty = entry["n_effect_params"] * math.log(max(2 * n_rows, 2))
-    dchi2 = -(float(entry["delta_bic"]) - penalty)
-    p = float(chi2_dist.sf(dchi2, k)) if dchi2 > 0 else 1.0
-    return {"effect": entry["effect"], "delta_chi2_heldout": dchi2, "dof": k,
-            "p_value": p, "threshold": float(chi2_dist.isf(alpha / max(n_candidates, 1), k)),
-            "significant": bool(p < alpha / max(n_candidates, 1))}
 
 
 def _given_prediction(state) -> np.ndarray:

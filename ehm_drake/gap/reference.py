@@ -71,7 +71,6 @@ from .calibration import (
     null_threshold,
 )
 from .diagnose import (
-    AMBIGUITY_MARGIN,
     Diagnosis,
     DiagnosisError,
     LabData,
@@ -99,6 +98,7 @@ from .scatter import (
     profile_nuisance,
     scatter_residual,
 )
+from .verdict import AMBIGUITY_MARGIN
 
 #: Where each candidate's fit starts: its strength path (fractions of the
 #: model's plausible range, `models.STRENGTH_PATH`) and "off"; for a
