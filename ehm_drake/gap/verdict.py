@@ -73,7 +73,7 @@ def joint_test(entry: dict, n_rows: int, n_candidates: int,
     candidate's k parameters (the likelihood-ratio statistic of the held-out
     rows) is compared with chi^2 on k degrees of freedom at alpha /
     candidates (the best of n_candidates was picked).  The p-value is
-    nominal (correlated bins make it too small); `_assemble` names an effect
+    nominal (correlated bins make it too small); `decide` names an effect
     on it only together with the half of the held-out gap removed."""
     k = max(int(entry["n_effect_params"]), 1)
     penalty = entry["n_effect_params"] * math.log(max(2 * n_rows, 2))
