@@ -605,7 +605,6 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
                for n in names]
     ranking.sort(key=lambda r: (r["delta_bic"], -r["gap_reduction_heldout"]))
     evidence = level_evidence(rows)
-    nonlinear_evidence = any(e["significant"] for e in evidence.values())
     d = decide(len(significant), ranking, len(rows), len(names), evidence)
     best, verdict = d["best"], d["verdict"]
     experiment = separating_experiment(best, d["close"][0], state) if d["close"] else None
@@ -632,7 +631,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
         "ambiguous_with": ambiguous_with,
         "separating_experiment": experiment,
         "explanation": explanation,
-        "evidence": {"level": evidence, "nonlinear": nonlinear_evidence},
+        "evidence": {"level": evidence, "nonlinear": d["nonlinear_evidence"]},
         "base_refit": {n: float(math.exp(b)) for n, b in
                        zip(base_names, results["none"]["theta"][:nb], strict=True)},
         "data": {"source": lab.source, "rows": len(rows),

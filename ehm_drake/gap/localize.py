@@ -177,10 +177,15 @@ def chi2_rows(rows: Rows, H_model: np.ndarray) -> np.ndarray:
     return np.abs(H_model - rows.H) ** 2 / (rows.rel_var * mag2 + 1e-300)
 
 
+def bic_penalty(k: int, n_rows: int) -> float:
+    """The BIC penalty k ln(2n) of k extra parameters on n complex rows."""
+    return k * math.log(max(2 * n_rows, 2))
+
+
 def delta_bic(chi_held: np.ndarray, chi_held_ref: np.ndarray, k: int, n_rows: int) -> float:
     """Held-out chi^2 change against a reference fit plus the BIC penalty
     k ln(2n) of k extra parameters on n complex rows (< 0: supported)."""
-    return float(np.nansum(chi_held) - np.nansum(chi_held_ref) + k * math.log(max(2 * n_rows, 2)))
+    return float(np.nansum(chi_held) - np.nansum(chi_held_ref) + bic_penalty(k, n_rows))
 
 
 def mark_after(cells_before: list[dict], cells_after: list[dict]) -> list[dict]:

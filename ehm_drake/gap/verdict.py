@@ -18,9 +18,9 @@ significant cell, the best candidate is named when it meets the
 
 from __future__ import annotations
 
-import math
-
 from scipy.stats import chi2 as chi2_dist
+
+from .localize import bic_penalty
 
 VERDICTS = ("explained", "ambiguous", "unexplained", "no_significant_gap")
 #: The best candidate must remove this share of the held-out gap.
@@ -37,8 +37,9 @@ def decide(n_significant: int, ranking: list[dict], n_rows: int, n_candidates: i
     """The verdict from the significant cells and the candidates' ranking
     (best first; entries as `_ranking_entry` makes them) and the level
     evidence: `verdict`, the `best` entry, the entries `close` to it (the
-    ambiguity), the `joint` test of the best and whether the effect is named
-    on it alone (`jointly`: no cell significant)."""
+    ambiguity), the `joint` test of the best, whether the effect is named
+    on it alone (`jointly`: no cell significant) and whether any level
+    evidence is significant (`nonlinear_evidence`)."""
     nonlinear_evidence = any(e["significant"] for e in evidence.values())
     best = ranking[0] if ranking else None
     joint = joint_test(best, n_rows, n_candidates) if best else None
@@ -60,7 +61,7 @@ def decide(n_significant: int, ranking: list[dict], n_rows: int, n_candidates: i
                 and r["level_dependent"]))]
         verdict = "ambiguous" if close else "explained"
     return {"verdict": verdict, "best": best, "close": close, "joint": joint,
-            "jointly": jointly}
+            "jointly": jointly, "nonlinear_evidence": nonlinear_evidence}
 
 
 def joint_test(entry: dict, n_rows: int, n_candidates: int,
@@ -76,8 +77,8 @@ def joint_test(entry: dict, n_rows: int, n_candidates: int,
     nominal (correlated bins make it too small); `decide` names an effect
     on it only together with the half of the held-out gap removed."""
     k = max(int(entry["n_effect_params"]), 1)
-    penalty = entry["n_effect_params"] * math.log(max(2 * n_rows, 2))
-    dchi2 = -(float(entry["delta_bic"]) - penalty)
+    # delta BIC less its penalty: the held-out chi^2 improvement itself.
+    dchi2 = -(float(entry["delta_bic"]) - bic_penalty(entry["n_effect_params"], n_rows))
     p = float(chi2_dist.sf(dchi2, k)) if dchi2 > 0 else 1.0
     return {"effect": entry["effect"], "delta_chi2_heldout": dchi2, "dof": k,
             "p_value": p, "threshold": float(chi2_dist.isf(alpha / max(n_candidates, 1), k)),
