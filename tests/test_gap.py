@@ -148,6 +148,30 @@ def test_the_bands_are_the_issue_bands():
 # ---------------------------------------------------------------------------
 
 
+def test_the_first_bin_of_a_welch_grid_is_not_analysed():
+    """Its Hann main lobe reaches 0 Hz (tests/test_spectral.py measures the bias): the
+    diagnosis drops it, per channel and level, and keeps a table that starts higher."""
+    from ehm_drake.analysis.formats import FrfData
+    from ehm_drake.gap.localize import first_welch_bin, rows_from_frf
+
+    def table(freqs, level):
+        n = len(freqs)
+        return FrfData(direction=np.full(n, "z"), segment=np.full(n, "head"),
+                       dof=np.full(n, "pitch"), freq_hz=np.asarray(freqs, float),
+                       gain=np.ones(n), phase_deg=np.zeros(n), coherence=np.full(n, 0.9),
+                       level_rms=np.full(n, level), n_averages=np.full(n, 4.0))
+
+    welch = np.arange(1, 121) * 0.1  # 10 s segments: 0.1 ... 12 Hz
+    trimmed = np.arange(5, 121) * 0.1  # a lab's table from 0.5 Hz
+    frf = FrfData.concat([table(welch, 0.3), table(trimmed, 0.6), table(welch / 2, 1.0)])
+    first = first_welch_bin(frf)
+    assert first.sum() == 2
+    assert sorted(frf.freq_hz[first]) == pytest.approx([0.05, 0.1])
+    rows = rows_from_frf(frf)
+    for level, lowest in ((0.3, 0.2), (0.6, 0.5), (1.0, 0.1)):
+        assert rows.freq[rows.level == level].min() == pytest.approx(lowest)
+
+
 def test_synth_refuses_bad_requests(tmp_path):
     with pytest.raises(SynthError, match="strength"):
         SynthSpec({"arms": 1.5}, 1).validate()
