@@ -230,17 +230,17 @@ def test_transmissibility_of_rigid_channel_is_one():
     assert np.abs(ph_rot[b]).max() < 0.5
 
 
-def _lab_record(detrend_check_seed: int = 7):
-    """60 s at 200 Hz of a rigid channel pair (pelvis_z = d, head_pitch = 0.3 deg/m * d, the order of a trunk
-    pitch under z at 0.1-0.5 Hz)
-    as a lab records them: seat excitation flat 0.1-12 Hz (`band_limited_noise`, as
-    `ehm-drake synth`), gravity on the seat accelerometer, motion-capture noise of 0.1 mm
-    and 0.05 deg per sample, seat accelerometer noise 0.005 m/s^2."""
+def _lab_record(seed: int = 7):
+    """60 s at 200 Hz of a rigid channel pair as a lab records them: pelvis_z = d and
+    head_pitch = 0.3 deg/m * d (the order of a trunk pitch under z at 0.1-0.5 Hz); seat
+    excitation flat 0.1-12 Hz (`band_limited_noise`, as `ehm-drake synth`), gravity on the
+    seat accelerometer, motion-capture noise of 0.1 mm and 0.05 deg per sample, seat
+    accelerometer noise 0.005 m/s^2."""
     from ehm_drake.signals import band_limited_noise
 
     fs, n = 200.0, 12000
-    rng = np.random.default_rng(detrend_check_seed)
-    az = band_limited_noise(n, 1 / fs, np.ones(3), (0.1, 12.0), seed=detrend_check_seed)[:, 2]
+    rng = np.random.default_rng(seed)
+    az = band_limited_noise(n, 1 / fs, np.ones(3), (0.1, 12.0), seed=seed)[:, 2]
     d = _displacement_from_acc(az, fs)
     seat = np.column_stack([np.zeros(n), np.zeros(n), az + 9.81])
     seat = seat + 0.005 * rng.standard_normal((n, 3))
