@@ -291,8 +291,10 @@ def test_first_bin_is_biased_where_the_gain_rises_as_f_squared():
         f, g, _, _ = transmissibility(ts, nperseg=2000).get("z", "trunk", "pitch")
         ratios.append(g[:6] / (0.5 * (2 * np.pi * f[:6]) ** 2))
     med = np.median(ratios, axis=0)
-    assert med[0] > 1.5  # observed 2.1 (20 seeds: 1.5-3.1)
-    assert np.abs(med[1:] - 1).max() < 0.12  # observed 1.08 at the second bin
+    # observed on these 8 seeds: median 2.30 (1.75-2.37), then 1.07, 1.04, 0.99, 1.01,
+    # 1.03 (over 20 seeds the first bin is 1.5-3.1, median 2.1)
+    assert med[0] > 1.5
+    assert np.abs(med[1:] - 1).max() < 0.12
 
 
 def test_transmissibility_recovers_resonant_body_channel():
