@@ -152,7 +152,7 @@ def test_the_first_bin_of_a_welch_grid_is_not_analysed():
     """Its Hann main lobe reaches 0 Hz (tests/test_spectral.py measures the bias): the
     diagnosis drops it, per channel and level, and keeps a table that starts higher."""
     from ehm_drake.analysis.formats import FrfData
-    from ehm_drake.gap.localize import first_welch_bin, rows_from_frf
+    from ehm_drake.gap.localize import rows_from_frf
 
     def table(freqs, level):
         n = len(freqs)
@@ -164,7 +164,7 @@ def test_the_first_bin_of_a_welch_grid_is_not_analysed():
     welch = np.arange(1, 121) * 0.1  # 10 s segments: 0.1 ... 12 Hz
     trimmed = np.arange(5, 121) * 0.1  # a lab's table from 0.5 Hz
     frf = FrfData.concat([table(welch, 0.3), table(trimmed, 0.6), table(welch / 2, 1.0)])
-    first = first_welch_bin(frf)
+    first = frf.first_welch_bin()
     assert first.sum() == 2
     assert sorted(frf.freq_hz[first]) == pytest.approx([0.05, 0.1])
     rows = rows_from_frf(frf)

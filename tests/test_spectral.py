@@ -277,7 +277,7 @@ def test_first_bin_is_biased_where_the_gain_rises_as_f_squared():
     """A rotation that follows the seat acceleration (T = k (2 pi f)^2, the low-frequency
     law of every rotation under a translation), noise-free: the first bin's main lobe
     reaches 0 Hz and its H1 is about twice the truth, the bins above it are not biased
-    beyond their scatter (why `ehm_drake.gap.localize.first_welch_bin` is not analysed)."""
+    beyond their scatter (why `FrfData.first_welch_bin` is not analysed)."""
     from ehm_drake.signals import band_limited_noise
 
     fs, n = 200.0, 6000

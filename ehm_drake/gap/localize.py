@@ -146,31 +146,11 @@ PLANE_CHANNELS = {
 }
 
 
-def first_welch_bin(frf: FrfData) -> np.ndarray:
-    """Rows that are the first bin of their channel's Welch grid: f < 1.5 df, df the
-    spacing of the channel's frequencies (a table that starts higher has none).
-
-    The Hann window's main lobe spans +-2 df, so the first bin's reaches 0 Hz, below any
-    excitation band: H1 there is not an estimate of T(f).  Where the gain rises as f^2
-    (every rotation under a translation at low frequency) it is 1.5-3.1 times the truth
-    (median 2.1; 20 noise-free 30 s records of a flat 0.1-12 Hz excitation, 10 s
-    segments); the second bin 0.7-1.5 (median 1.08), inside its coherence-based error,
-    like the bins above it."""
-    out = np.zeros(len(frf.freq_hz), bool)
-    for idx in frf._groups().values():
-        f = np.unique(frf.freq_hz[idx])
-        if f.size < 2:
-            continue
-        df = float(np.min(np.diff(f)))
-        out[idx] = frf.freq_hz[idx] < 1.5 * df
-    return out
-
-
 def rows_from_frf(frf: FrfData, floor: float = MODEL_FLOOR,
                   default_n_averages: int = DEFAULT_N_AVERAGES,
                   channels: str = "plane") -> Rows:
     """The analysed rows of `frf`: inside the bands, not the first bin of a
-    Welch grid (`first_welch_bin`) and, with channels = "plane" (default), in
+    Welch grid (`FrfData.first_welch_bin`) and, with channels = "plane" (default), in
     the excitation's plane of motion (`PLANE_CHANNELS`; "all" keeps every
     channel)."""
     if channels not in ("plane", "all"):
@@ -179,7 +159,7 @@ def rows_from_frf(frf: FrfData, floor: float = MODEL_FLOOR,
     H = frf.gain * np.exp(1j * np.radians(frf.phase_deg))
     n = np.where(np.isfinite(frf.n_averages), frf.n_averages, float(default_n_averages))
     names = np.char.add(np.char.add(frf.segment.astype(str), "_"), frf.dof.astype(str))
-    keep = (b >= 0) & ~first_welch_bin(frf)
+    keep = (b >= 0) & ~frf.first_welch_bin()
     if channels == "plane":
         keep &= np.array([nm in PLANE_CHANNELS[d] for nm, d in zip(names, frf.direction,
                                                                    strict=True)])

@@ -155,9 +155,13 @@ class Residuals:
     @classmethod
     def build(cls, frf: FrfData, weights: dict[str, float], phase_weight: float = 0.5,
               min_coherence: float = 0.3, phase_min_coherence: float = 0.8) -> Residuals:
-        keep = frf.coherence >= min_coherence
+        # The first bin of each Welch grid is not an estimate of T(f) (its window
+        # reaches 0 Hz: `FrfData.first_welch_bin`); the fit leaves it out as the gap
+        # diagnosis does.
+        keep = (frf.coherence >= min_coherence) & ~frf.first_welch_bin()
         if not np.any(keep):
-            raise FitError(f"no data row has coherence >= {min_coherence}; nothing to fit")
+            raise FitError(f"no data row has coherence >= {min_coherence} (the first bin of "
+                           "each Welch grid left out); nothing to fit")
         direction = frf.direction[keep]
         segment = frf.segment[keep]
         dof = frf.dof[keep]
