@@ -38,7 +38,11 @@ with the group; the model gives only the *shape* of each candidate effect:
    subject (Student t, family-wise `FAMILY_ALPHA` over the candidates;
    `calibration.null_threshold`), and `MIN_GAIN`.  A candidate that no
    reference subject fits (every null gain 0) borrows the group's typical
-   spread.
+   spread.  Every bound is then raised, when needed, so that the group's
+   own subjects hold the family-wise level without any assumption on the
+   gains' distribution: by the k-th smallest, k = ceil(0.9 (K + 1)), of
+   their largest ratios of gain to bound over the candidates (a conformal
+   bound, `calibration.family_scale`; the largest at K = 16).
 6. Verdict: `explained` (among the candidates beyond their null, the one
    furthest beyond its threshold, evidence less threshold), `ambiguous`
    (another within `AMBIGUITY_MARGIN` of its held-out share),
@@ -68,7 +72,7 @@ from .calibration import (
     FAMILY_ALPHA,
     MIN_GAIN,
     group_null_spread,
-    null_threshold,
+    thresholds,
 )
 from .diagnose import (
     Diagnosis,
@@ -528,18 +532,25 @@ def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, li
     return ("unexplained" if n_significant else "no_significant_gap"), None, []
 
 
-def _against_null(name: str, evidence: float, null, n_candidates: int,
-                  spread: float | None) -> dict:
-    """A candidate's threshold from its null gains and whether its evidence
-    is beyond it (the entries of the report's ranking)."""
-    threshold = null_threshold(null, n_candidates, name=name, borrowed_spread=spread)
-    return {"null_threshold": threshold, "beyond_null": bool(evidence > threshold)}
+def _against_null(evidence: float, threshold: float, bound: float) -> dict:
+    """A candidate's threshold (`calibration.thresholds`), its own bound
+    before the family-wise factor, and whether its evidence is beyond the
+    threshold (the entries of the report's ranking)."""
+    return {"null_threshold": threshold, "null_bound": bound,
+            "beyond_null": bool(evidence > threshold)}
+
+
+def _family_record(fam: dict) -> dict:
+    """The report's record of the family-wise factor (`calibration.family_scale`)."""
+    return {"family_scale": fam["scale"], "family_score": fam["score"],
+            "family_rank": fam["rank"], "family_level": fam["level"]}
 
 
 def rethreshold(report: dict) -> dict:
     """A reference-group `report` judged again with this code's thresholds
-    (`calibration.null_threshold`) from its stored null gains and evidence:
-    each candidate's `null_threshold` and `beyond_null`, the ranking's order
+    (`calibration.thresholds`) from its stored null gains and evidence:
+    each candidate's `null_threshold`, `null_bound` and `beyond_null`, the
+    method's family-wise factor, the ranking's order
     and the verdict (`decide`).  The fits are not redone; the explanation
     and the gaps after the best effect stay as stored.  Returns a copy."""
     if report.get("method", {}).get("design") != "reference group":
@@ -548,8 +559,14 @@ def rethreshold(report: dict) -> dict:
     out = json.loads(json.dumps(report))
     names = out["method"]["candidates"]
     spread = out["method"].get("borrowed_null_spread")
+    thr, bounds, fam = thresholds({e["effect"]: e["null_gains"] for e in out["ranking"]},
+                                  borrowed_spread=spread)
+    if len(out["ranking"]) != len(names):
+        raise DiagnosisError(f"the report ranks {len(out['ranking'])} candidates but names "
+                             f"{len(names)}")
     for e in out["ranking"]:
-        e.update(_against_null(e["effect"], e["evidence"], e["null_gains"], len(names), spread))
+        e.update(_against_null(e["evidence"], thr[e["effect"]], bounds[e["effect"]]))
+    out["method"].update(_family_record(fam))
     verdict, best, ambiguous_with = decide(out["ranking"], out["significant_cells"])
     out.update(verdict=verdict, best_effect=best, ambiguous_with=ambiguous_with,
                best_candidate=out["ranking"][0]["effect"] if out["ranking"] else None)
@@ -563,12 +580,13 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
     n_rows = len(rows)
     ranking = []
     spread = group_null_spread({n: nulls.get(n, []) for n in names})
+    thr, bounds, fam = thresholds({n: nulls.get(n, []) for n in names}, borrowed_spread=spread)
     for n in names:
         r = results[n]
         cand = Candidate(tuple(n.split("+")))
         gain = _gain(r, base)
         evidence = _evidence(r, base)
-        null = [g for g in nulls.get(n, []) if g is not None]
+        null = list(nulls.get(n, []))  # per reference subject, in the group's order
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
@@ -587,7 +605,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                              {e: {p: float(v) for p, v in vals.items()} for e, vals in
                               cand.values(np.array(r["level_coords"])).items()}),
             "evidence": evidence, "null_gains": null,
-            **_against_null(n, evidence, null, len(names), spread),
+            **_against_null(evidence, thr[n], bounds[n]),
             "level_dependent": cand.level_dependent, "n_effect_params": k,
             "base_scales": dict(zip(base_names, np.exp(anchor["log_scales"]).tolist(),
                                     strict=True)),
@@ -652,7 +670,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                    "heldout_sets": [f"{t.direction}@{t.level:g}" for t in group.tests],
                    "null_alpha": FAMILY_ALPHA, "min_gain": MIN_GAIN,
                    "degenerate_null_gain": DEGENERATE_GAIN,
-                   "borrowed_null_spread": spread,
+                   "borrowed_null_spread": spread, **_family_record(fam),
                    "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
                    "model_floor": MODEL_FLOOR,
                    "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "
