@@ -101,60 +101,71 @@ def group_null_spread(nulls: dict) -> float | None:
     return float(math.sqrt(np.median(var))) if var else None
 
 
-def family_scale(nulls: dict, bounds: dict, alpha: float = FAMILY_ALPHA) -> dict:
-    """The factor every candidate's bound (`null_threshold`) is raised by so
-    that the group's own subjects hold the family-wise level: a split
-    conformal bound (Vovk et al. 2005; Lei et al. 2018) on the largest
-    ratio of evidence to bound over the candidates.
 
-    Each reference subject j, scored against the other K - 1 (`nulls`:
-    {candidate: [gain of subject 0 .. K-1]}, the same subjects in the same
-    order for every candidate), has a score s_j = max over the candidates of
-    gain / bound.  A subject without any effect is exchangeable with them,
-    so its own score exceeds the k-th smallest s_j, k = ceil((1 - alpha)
-    (K + 1)), with probability at most 1 - k / (K + 1) <= alpha: the
-    family-wise false-alarm rate, whatever the gains' distribution.  (With
-    K < 1 / alpha - 1 subjects the largest is used and the level is
-    1 / (K + 1), above alpha: `reference.group_size_caution` says so.)  The
-    per-candidate bounds alone assume a distribution of the gains; the nulls
-    of a body that is not the model are mixtures -- most subjects 0 (the fit
-    stays "off"), a few far above -- whose tails no bound from K values
-    captures: on `spine5`'s seed-2061 group of 16 they let 6 of 30 fresh
-    no-effect subjects have an effect named (20%).
+def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
+               borrowed_spread: float | None = None) -> tuple[dict, dict, dict]:
+    """Every candidate's threshold for one subject, from the group's null
+    gains (`nulls`: {candidate: [evidence of reference subject 0 .. K-1,
+    each against the others]}, the same subjects in the same order for
+    every candidate) and the subject's own evidence (`evidence`:
+    {candidate: value}).  Returns (thresholds, bounds, the family-wise
+    record).
 
-    Returns {"scale": max(1, that score) -- never below the bounds, which
-    keep their own level when the scores are all below 1 --, "score": it,
-    "rank": k, "level": 1 - k / (K + 1), "subjects": K}."""
-    names = [n for n in bounds if n in nulls]
-    if not names:
-        return {"scale": 1.0, "score": None, "rank": None, "level": None, "subjects": 0}
-    sizes = {len(nulls[n]) for n in names}
-    if len(sizes) != 1:
+    Two conditions, both needed for a candidate to be named:
+
+    1. its own bound (`null_threshold` on its null gains, Bonferroni over
+       the candidates): what the thresholds were until stop 55;
+    2. a full conformal test of the family (Vovk, Gammerman & Shafer 2005;
+       Lei et al. 2018), which holds the family-wise level whatever the
+       gains' distribution.  The K + 1 subjects -- the group's and this
+       one -- are scored alike: each candidate's bound is computed on the
+       K + 1 values of its evidence (the subject's included, so the
+       normalizer is a symmetric function of all of them), and a subject's
+       score is its largest ratio of evidence to that bound over the
+       candidates.  A subject without any effect is exchangeable with the
+       group's, so its score exceeds the k-th smallest of theirs, k =
+       ceil((1 - alpha)(K + 1)), with probability at most 1 - k / (K + 1)
+       <= alpha (with K < 1 / alpha - 1 subjects the largest is used and
+       the level is 1 / (K + 1)).  For candidate c this reads: evidence >
+       (its augmented bound) x (that k-th score).  (Each reference
+       subject's evidence is against K - 1 others, the subject's against
+       K: the reference subjects' scores are, if anything, the larger, and
+       the test the more cautious.)
+
+    Why: the per-candidate bounds assume a distribution of the gains, and
+    the nulls of a body that is not the model are mixtures -- most subjects
+    0 (the fit stays "off"), a few far above -- whose tails no bound from K
+    values captures: on `spine5`'s seed-2061 group of 16 they let 6 of 30
+    fresh no-effect subjects have an effect named (20%).  The threshold
+    reported is max(bound, augmented bound x k-th score): the evidence
+    must exceed it.  It depends on the subject's evidence (through the
+    augmented bounds), so it is the subject's own."""
+    names = list(nulls)
+    n = len(names)
+    sizes = {len(nulls[c]) for c in names}
+    if len(sizes) > 1:
         raise DiagnosisError(f"the candidates' null gains are of different lengths {sizes}: "
-                             "the family-wise bound needs each reference subject's gain for "
+                             "the family-wise test needs each reference subject's gain for "
                              "every candidate")
+    missing = [c for c in names if c not in evidence]
+    if missing:
+        raise DiagnosisError(f"no evidence for candidates {missing}")
+    bounds = {c: null_threshold(nulls[c], n, alpha, name=c, borrowed_spread=borrowed_spread)
+              for c in names}
+    if not names:
+        return {}, {}, {"score": None, "rank": None, "level": None, "subjects": 0}
+    aug = {c: null_threshold([*nulls[c], evidence[c]], n, alpha, name=c,
+                             borrowed_spread=borrowed_spread) for c in names}
     k_subj = sizes.pop()
-    ratio = np.full((k_subj, len(names)), -np.inf)
-    for i, n in enumerate(names):
-        g = np.array([np.nan if x is None else x for x in nulls[n]], float)
+    ratio = np.full((k_subj, n), -np.inf)
+    for i, c in enumerate(names):
+        g = np.array([np.nan if x is None else x for x in nulls[c]], float)
         ok = np.isfinite(g)
-        ratio[ok, i] = g[ok] / bounds[n]
+        ratio[ok, i] = g[ok] / aug[c]
     scores = np.sort(ratio.max(axis=1))
     k = min(k_subj, math.ceil((1 - alpha) * (k_subj + 1)))
     score = float(scores[k - 1])
-    return {"scale": max(1.0, score), "score": score, "rank": int(k),
-            "level": float(1 - k / (k_subj + 1)), "subjects": int(k_subj)}
-
-
-def thresholds(nulls: dict, alpha: float = FAMILY_ALPHA,
-               borrowed_spread: float | None = None) -> tuple[dict, dict, dict]:
-    """Every candidate's threshold from the group's null gains (`nulls`:
-    {candidate: [gain per reference subject]}): its own bound
-    (`null_threshold`, Bonferroni over the candidates) raised by the
-    family-wise factor (`family_scale`).  Returns (thresholds, bounds,
-    the family-wise factor's record)."""
-    n = len(nulls)
-    bounds = {name: null_threshold(g, n, alpha, name=name, borrowed_spread=borrowed_spread)
-              for name, g in nulls.items()}
-    fam = family_scale(nulls, bounds, alpha)
-    return {name: b * fam["scale"] for name, b in bounds.items()}, bounds, fam
+    thr = {c: max(bounds[c], aug[c] * score) for c in names}
+    return thr, bounds, {"score": score, "rank": int(k), "level": float(1 - k / (k_subj + 1)),
+                         "subjects": int(k_subj),
+                         "subject_score": float(max(evidence[c] / aug[c] for c in names))}

@@ -38,11 +38,12 @@ with the group; the model gives only the *shape* of each candidate effect:
    subject (Student t, family-wise `FAMILY_ALPHA` over the candidates;
    `calibration.null_threshold`), and `MIN_GAIN`.  A candidate that no
    reference subject fits (every null gain 0) borrows the group's typical
-   spread.  Every bound is then raised, when needed, so that the group's
-   own subjects hold the family-wise level without any assumption on the
-   gains' distribution: by the k-th smallest, k = ceil(0.9 (K + 1)), of
-   their largest ratios of gain to bound over the candidates (a conformal
-   bound, `calibration.family_scale`; the largest at K = 16).
+   spread.  And the subject must stand out of the group as a whole: its
+   largest ratio of evidence to bound over the candidates must exceed the
+   k-th smallest, k = ceil(0.9 (K + 1)), of the group's subjects' (the
+   largest at K = 16; the bounds from the K + 1 values) -- a full
+   conformal test that holds the family-wise level whatever the gains'
+   distribution (`calibration.thresholds`).
 6. Verdict: `explained` (among the candidates beyond their null, the one
    furthest beyond its threshold, evidence less threshold), `ambiguous`
    (another within `AMBIGUITY_MARGIN` of its held-out share),
@@ -541,16 +542,18 @@ def _against_null(evidence: float, threshold: float, bound: float) -> dict:
 
 
 def _family_record(fam: dict) -> dict:
-    """The report's record of the family-wise factor (`calibration.family_scale`)."""
-    return {"family_scale": fam["scale"], "family_score": fam["score"],
-            "family_rank": fam["rank"], "family_level": fam["level"]}
+    """The report's record of the family-wise conformal test
+    (`calibration.thresholds`): the group's k-th score, k, the level, and
+    the subject's own score (beyond the group's k-th: the family passes)."""
+    return {"family_score": fam["score"], "family_rank": fam["rank"],
+            "family_level": fam["level"], "family_subject_score": fam.get("subject_score")}
 
 
 def rethreshold(report: dict) -> dict:
     """A reference-group `report` judged again with this code's thresholds
     (`calibration.thresholds`) from its stored null gains and evidence:
     each candidate's `null_threshold`, `null_bound` and `beyond_null`, the
-    method's family-wise factor, the ranking's order
+    method's family-wise record, the ranking's order
     and the verdict (`decide`).  The fits are not redone; the explanation
     and the gaps after the best effect stay as stored.  Returns a copy."""
     if report.get("method", {}).get("design") != "reference group":
@@ -560,6 +563,7 @@ def rethreshold(report: dict) -> dict:
     names = out["method"]["candidates"]
     spread = out["method"].get("borrowed_null_spread")
     thr, bounds, fam = thresholds({e["effect"]: e["null_gains"] for e in out["ranking"]},
+                                  {e["effect"]: e["evidence"] for e in out["ranking"]},
                                   borrowed_spread=spread)
     if len(out["ranking"]) != len(names):
         raise DiagnosisError(f"the report ranks {len(out['ranking'])} candidates but names "
@@ -580,7 +584,9 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
     n_rows = len(rows)
     ranking = []
     spread = group_null_spread({n: nulls.get(n, []) for n in names})
-    thr, bounds, fam = thresholds({n: nulls.get(n, []) for n in names}, borrowed_spread=spread)
+    evidence_of = {n: _evidence(results[n], results["none"]) for n in names}
+    thr, bounds, fam = thresholds({n: nulls.get(n, []) for n in names}, evidence_of,
+                                  borrowed_spread=spread)
     for n in names:
         r = results[n]
         cand = Candidate(tuple(n.split("+")))
