@@ -964,3 +964,99 @@ def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():
     res = scorer.score(shape, g, [name])
     assert abs(res[name]["coords"][0] - 0.01 * full) > 0.005 * full
     assert _gain(res[name], res["none"]) < 1.0
+
+
+def _lognormal_mixture_nulls(rng, n_subjects, p_on=0.3, sigma=1.5):
+    """Gains of subjects without any effect, 8 candidates: most subjects 0
+    (the fit stays "off"), the others log-normal with a heavy tail, each
+    candidate on its own scale -- the shape of the measured nulls of a body
+    that is not the model (`spine5_null_evidence.json`)."""
+    scales = np.array([10, 30, 100, 300, 1000, 50, 200, 20.0])
+    on = rng.random((n_subjects, 8)) < p_on
+    return np.where(on, scales * np.exp(sigma * rng.standard_normal((n_subjects, 8))), 0.0)
+
+
+def test_the_family_wise_test_holds_its_level_whatever_the_gains_distribution():
+    """Heavy-tailed nulls (`_lognormal_mixture_nulls`), groups of 16 and one
+    fresh no-effect subject each: the candidates' own bounds name an effect
+    on about a third of the subjects (their distribution assumption fails);
+    with the family-wise conformal test the rate is at most 1 / 17 (plus
+    three Monte-Carlo standard errors), and a subject with a strong effect
+    on one candidate is still named for it."""
+    from ehm_drake.gap.calibration import group_null_spread, thresholds
+
+    rng = np.random.default_rng(55)
+    groups = 600
+    names = [f"c{i}" for i in range(8)]
+    own = family = strong = 0
+    for _ in range(groups):
+        null = _lognormal_mixture_nulls(rng, 16)
+        nulls = {c: list(null[:, i]) for i, c in enumerate(names)}
+        fresh = dict(zip(names, _lognormal_mixture_nulls(rng, 1)[0], strict=True))
+        spread = group_null_spread(nulls)  # as the diagnosis does
+        thr, bounds, fam = thresholds(nulls, fresh, borrowed_spread=spread)
+        assert all(thr[c] >= bounds[c] for c in names)
+        assert (fam["rank"], fam["subjects"]) == (16, 16)
+        own += any(fresh[c] > bounds[c] for c in names)
+        family += any(fresh[c] > thr[c] for c in names)
+        effect = {**fresh, "c2": fresh["c2"] + 50 * null[:, 2].max() + 1e4}
+        thr = thresholds(nulls, effect, borrowed_spread=spread)[0]
+        strong += effect["c2"] > thr["c2"]
+    level = 1 / 17
+    assert own / groups > 0.25
+    assert family / groups <= level + 3 * np.sqrt(level * (1 - level) / groups)
+    assert strong / groups > 0.95
+
+
+def test_the_family_wise_test_on_measured_no_effect_subjects():
+    """No-effect subjects of blind runs, each candidate's evidence and its
+    group's leave-one-out gains (`bench/null_calibration.py --out`):
+    `spine5` seed 2061, 30 subjects against a group of 16 (stop 54), and
+    `lumped`'s 68 against groups of 8 and 42 against groups of 16 (stops 44,
+    45).  Named with the candidates' own bounds: 6 of 30, 10 of 68, 2 of 42
+    (the 10% bar missed on two).  With the family-wise test
+    (`calibration.thresholds`): 1 of 30, 0 of 68, 0 of 42 (measured at stop
+    55; the rule was chosen after the `spine5` run was seen, so this is a
+    record, not a blind confirmation: docs/gap_diagnosis_realities.md)."""
+    from ehm_drake.gap.calibration import thresholds
+
+    nc = _bench("null_calibration")
+    spine5 = json.loads((DATA / "spine5_null_evidence.json").read_text())
+    assert sum(len(e["evidence"]) for e in spine5.values()) == 30
+    assert all(len(g) == 16 for e in spine5.values() for g in e["null_gains"].values())
+    assert nc.exceedances(spine5, nc.clipped_at(0.0))["named"] == 6
+    for name, bar in (("spine5_null_evidence", 3), ("lumped_null_evidence", 6),
+                      ("lumped_null_evidence_k16", 4)):
+        data = json.loads((DATA / f"{name}.json").read_text())
+        got = nc.family_named(data)
+        assert got["named"] <= min(bar, nc.exceedances(data, nc.clipped_at(0.0))["named"]), name
+    # A subject beyond every reference subject on one candidate by far is named.
+    entry = next(iter(spine5.values()))
+    nulls = entry["null_gains"]
+    ev = {n: 0.0 for n in nulls}
+    ev["reflex_delay"] = 20 * max(nulls["reflex_delay"])
+    thr = thresholds(nulls, ev, borrowed_spread=entry["borrowed_spread"])[0]
+    assert ev["reflex_delay"] > thr["reflex_delay"]
+
+
+def test_the_family_wise_test_refuses_nulls_of_unequal_subjects():
+    """The test pairs each reference subject's gains over the candidates:
+    nulls of different lengths, or a candidate without evidence, are
+    refused with a message; with 8 subjects the largest score is used and
+    the level said (1/9)."""
+    from ehm_drake.gap.calibration import thresholds
+
+    with pytest.raises(DiagnosisError, match="different lengths"):
+        thresholds({"a": [0.0, 1.0, 2.0], "b": [0.0, 1.0]}, {"a": 0.0, "b": 0.0})
+    with pytest.raises(DiagnosisError, match="no evidence"):
+        thresholds({"a": [0.0, 1.0, 2.0]}, {})
+    null = {"a": [0, 3, 5, 8, 12, 20, 35, 160.0], "b": [0.0] * 8}
+    thr, bounds, fam = thresholds(null, {"a": 0.0, "b": 0.0})
+    assert fam["rank"] == 8 and fam["level"] == pytest.approx(1 / 9)
+    assert all(thr[c] >= bounds[c] for c in null)
+    # Subject 7's 160 stands out of a's null: the largest score is its.
+    assert fam["score"] > 1
+    # A subject further out than it on b (160 / 13, scaled to b's bound) is
+    # named for b; one just below it is not.
+    edge = thresholds(null, {"a": 0.0, "b": 1e3})
+    assert edge[0]["b"] < 1e3
