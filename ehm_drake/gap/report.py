@@ -79,6 +79,10 @@ def _pct(x) -> str:
     return "n/a" if x is None else f"{100 * x:.0f}%"
 
 
+def _num(x) -> str:
+    return "n/a" if x is None else f"{x:.2f}"
+
+
 def markdown(rep: dict, figures: list[str]) -> str:
     lines = [f"# Sim-to-real gap diagnosis: **{rep['verdict']}**", ""]
     lines.append(rep.get("explanation", ""))
@@ -186,7 +190,13 @@ def markdown(rep: dict, figures: list[str]) -> str:
                   f"level-difference gain) exceeds the upper "
                   f"prediction bound of the evidence it reaches on the reference group's own "
                   f"subjects (leave one out; Student t, family-wise alpha "
-                  f"{m.get('null_alpha')} over the candidates) and {m.get('min_gain')}; the "
+                  f"{m.get('null_alpha')} over the candidates) and {m.get('min_gain')}, and "
+                  f"the subject stands out of the group as a whole: its largest ratio of "
+                  f"evidence to bound over the candidates ({_num(m.get('family_subject_score'))}"
+                  f") beyond the group's own subjects' ({_num(m.get('family_score'))}, the k-th "
+                  f"smallest of them, k = {m.get('family_rank')}; a full conformal test, false "
+                  f"alarms at most {_pct(m.get('family_level'))} whatever the evidence's "
+                  f"distribution); the "
                   f"candidate furthest beyond its threshold is named; ambiguous when another "
                   f"named one comes within "
                   f"{_pct(m.get('ambiguity_margin'))} of its held-out share."
