@@ -1060,3 +1060,19 @@ def test_the_family_wise_test_refuses_nulls_of_unequal_subjects():
     # named for b; one just below it is not.
     edge = thresholds(null, {"a": 0.0, "b": 1e3})
     assert edge[0]["b"] < 1e3
+
+
+def test_a_candidate_held_back_by_the_family_wise_test_is_said():
+    """When no candidate is named but one exceeds its own bound, the
+    explanation names it with both scores (a lead, not a finding); none
+    beyond its own bound, nothing said."""
+    from ehm_drake.gap.reference import held_back_note
+
+    fam = {"score": 3.26, "subject_score": 1.91}
+    ranking = [{"effect": "visceral_mass", "evidence": 538.0, "null_bound": 344.0},
+               {"effect": "reflex_delay", "evidence": 170.0, "null_bound": 154.0},
+               {"effect": "arms", "evidence": -498.0, "null_bound": 244.0}]
+    note = held_back_note(ranking, fam)
+    assert note.startswith("visceral_mass exceeds its own bound (538 against 344)")
+    assert "1.91 against 3.26" in note
+    assert held_back_note(ranking[2:], fam) is None

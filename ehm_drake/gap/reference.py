@@ -549,6 +549,23 @@ def _family_record(fam: dict) -> dict:
             "family_level": fam["level"], "family_subject_score": fam.get("subject_score")}
 
 
+def held_back_note(ranking: list[dict], fam: dict) -> str | None:
+    """What the family-wise test held back, when no candidate is named:
+    the candidate furthest beyond its own bound (`null_bound`), if any, with
+    the subject's and the group's scores (`calibration.thresholds`) -- a
+    lead to check with another test, not a finding.  None when no candidate
+    exceeds its own bound."""
+    own = [e for e in ranking if e["evidence"] > e["null_bound"]]
+    if not own or fam.get("score") is None:
+        return None
+    e = max(own, key=lambda e: e["evidence"] / e["null_bound"])
+    return (f"{e['effect']} exceeds its own bound ({e['evidence']:.0f} against "
+            f"{e['null_bound']:.0f}) but the subject stands out of the group less than the "
+            f"group's own most outlying subjects do (largest ratio of evidence to bound "
+            f"{fam['subject_score']:.2f} against {fam['score']:.2f}; family-wise test): not "
+            f"named, a lead to check with another test")
+
+
 def rethreshold(report: dict) -> dict:
     """A reference-group `report` judged again with this code's thresholds
     (`calibration.thresholds`) from its stored null gains and evidence:
@@ -643,6 +660,9 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         explanation = ("the subject is within the reference group's scatter (no cell beyond it "
                        "at p < 0.01, Bonferroni) and no candidate exceeds the gains it reaches on "
                        "the group's own subjects")
+    held_back = held_back_note(ranking, fam) if best_effect is None else None
+    if held_back:
+        explanation += "; " + held_back
     after = results[best["effect"]] if best else base
     cells_after = localize(rows, after["chi_all"])
     model_form = _model_form(group, log_model)

@@ -83,6 +83,10 @@ def _num(x) -> str:
     return "n/a" if x is None else f"{x:.2f}"
 
 
+def _num0(x) -> str:
+    return "n/a" if x is None else f"{x:.0f}"
+
+
 def markdown(rep: dict, figures: list[str]) -> str:
     lines = [f"# Sim-to-real gap diagnosis: **{rep['verdict']}**", ""]
     lines.append(rep.get("explanation", ""))
@@ -141,12 +145,13 @@ def markdown(rep: dict, figures: list[str]) -> str:
                   "level differences (down to zero). Of the candidates beyond their "
                   "threshold, the one furthest beyond it is named.", "",
                   "| effect | held-out chi^2 gain | level-difference gain | at the all-rows fit "
-                  "| evidence | threshold (group's own subjects) | beyond |",
-                  "|---|---|---|---|---|---|---|"]
+                  "| evidence | own bound | threshold (with the family-wise test) | beyond |",
+                  "|---|---|---|---|---|---|---|---|"]
         lines += [f"| {e['effect']} | {e['heldout_gain']:.0f} | "
                   f"{e.get('level_gain', 0.0):.0f} | "
                   f"{_at_fit(e)} | "
                   f"{e.get('evidence', e['heldout_gain']):.0f} | "
+                  f"{_num0(e.get('null_bound'))} | "
                   f"{e['null_threshold']:.0f} | {'yes' if e['beyond_null'] else 'no'} |"
                   for e in rep["ranking"]]
         lines += ["", f"Model-form gap (the model refit to the group against the group mean): "
