@@ -101,7 +101,6 @@ def group_null_spread(nulls: dict) -> float | None:
     return float(math.sqrt(np.median(var))) if var else None
 
 
-
 def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
                borrowed_spread: float | None = None) -> tuple[dict, dict, dict]:
     """Every candidate's threshold for one subject, from the group's null

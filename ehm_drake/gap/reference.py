@@ -579,12 +579,12 @@ def rethreshold(report: dict) -> dict:
     out = json.loads(json.dumps(report))
     names = out["method"]["candidates"]
     spread = out["method"].get("borrowed_null_spread")
-    thr, bounds, fam = thresholds({e["effect"]: e["null_gains"] for e in out["ranking"]},
-                                  {e["effect"]: e["evidence"] for e in out["ranking"]},
-                                  borrowed_spread=spread)
     if len(out["ranking"]) != len(names):
         raise DiagnosisError(f"the report ranks {len(out['ranking'])} candidates but names "
                              f"{len(names)}")
+    thr, bounds, fam = thresholds({e["effect"]: e["null_gains"] for e in out["ranking"]},
+                                  {e["effect"]: e["evidence"] for e in out["ranking"]},
+                                  borrowed_spread=spread)
     for e in out["ranking"]:
         e.update(_against_null(e["evidence"], thr[e["effect"]], bounds[e["effect"]]))
     out["method"].update(_family_record(fam))
