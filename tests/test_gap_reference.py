@@ -1066,7 +1066,7 @@ def test_a_candidate_held_back_by_the_family_wise_test_is_said():
     """When no candidate is named but one exceeds its own bound, the
     explanation names it with both scores (a lead, not a finding); none
     beyond its own bound, nothing said."""
-    from ehm_drake.gap.reference import held_back_note
+    from ehm_drake.gap.verdict import held_back_note
 
     fam = {"score": 3.26, "subject_score": 1.91}
     ranking = [{"effect": "visceral_mass", "evidence": 538.0, "null_bound": 344.0},

@@ -103,7 +103,7 @@ from .scatter import (
     profile_nuisance,
     scatter_residual,
 )
-from .verdict import AMBIGUITY_MARGIN
+from .verdict import AMBIGUITY_MARGIN, family_record, held_back_note
 
 #: Where each candidate's fit starts: its strength path (fractions of the
 #: model's plausible range, `models.STRENGTH_PATH`) and "off"; for a
@@ -541,31 +541,6 @@ def _against_null(evidence: float, threshold: float, bound: float) -> dict:
             "beyond_null": bool(evidence > threshold)}
 
 
-def _family_record(fam: dict) -> dict:
-    """The report's record of the family-wise conformal test
-    (`calibration.thresholds`): the group's k-th score, k, the level, and
-    the subject's own score (beyond the group's k-th: the family passes)."""
-    return {"family_score": fam["score"], "family_rank": fam["rank"],
-            "family_level": fam["level"], "family_subject_score": fam.get("subject_score")}
-
-
-def held_back_note(ranking: list[dict], fam: dict) -> str | None:
-    """What the family-wise test held back, when no candidate is named:
-    the candidate furthest beyond its own bound (`null_bound`), if any, with
-    the subject's and the group's scores (`calibration.thresholds`) -- a
-    lead to check with another test, not a finding.  None when no candidate
-    exceeds its own bound."""
-    own = [e for e in ranking if e["evidence"] > e["null_bound"]]
-    if not own or fam.get("score") is None:
-        return None
-    e = max(own, key=lambda e: e["evidence"] / e["null_bound"])
-    return (f"{e['effect']} exceeds its own bound ({e['evidence']:.0f} against "
-            f"{e['null_bound']:.0f}) but the subject stands out of the group less than the "
-            f"group's own most outlying subjects do (largest ratio of evidence to bound "
-            f"{fam['subject_score']:.2f} against {fam['score']:.2f}; family-wise test): not "
-            f"named, a lead to check with another test")
-
-
 def rethreshold(report: dict) -> dict:
     """A reference-group `report` judged again with this code's thresholds
     (`calibration.thresholds`) from its stored null gains and evidence:
@@ -587,7 +562,7 @@ def rethreshold(report: dict) -> dict:
                                   borrowed_spread=spread)
     for e in out["ranking"]:
         e.update(_against_null(e["evidence"], thr[e["effect"]], bounds[e["effect"]]))
-    out["method"].update(_family_record(fam))
+    out["method"].update(family_record(fam))
     verdict, best, ambiguous_with = decide(out["ranking"], out["significant_cells"])
     out.update(verdict=verdict, best_effect=best, ambiguous_with=ambiguous_with,
                best_candidate=out["ranking"][0]["effect"] if out["ranking"] else None)
@@ -696,7 +671,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                    "heldout_sets": [f"{t.direction}@{t.level:g}" for t in group.tests],
                    "null_alpha": FAMILY_ALPHA, "min_gain": MIN_GAIN,
                    "degenerate_null_gain": DEGENERATE_GAIN,
-                   "borrowed_null_spread": spread, **_family_record(fam),
+                   "borrowed_null_spread": spread, **family_record(fam),
                    "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
                    "model_floor": MODEL_FLOOR,
                    "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "

@@ -117,3 +117,28 @@ def explain(d: dict, n_significant: int, n_candidates: int) -> str:
                 f"(nominal p = {joint['p_value']:.2g} against {JOINT_SIGNIFICANCE:g} / "
                 f"{n_candidates} candidates); " + text)
     return text
+
+
+def family_record(fam: dict) -> dict:
+    """The report's record of the family-wise conformal test
+    (`calibration.thresholds`): the group's k-th score, k, the level, and
+    the subject's own score (beyond the group's k-th: the family passes)."""
+    return {"family_score": fam["score"], "family_rank": fam["rank"],
+            "family_level": fam["level"], "family_subject_score": fam.get("subject_score")}
+
+
+def held_back_note(ranking: list[dict], fam: dict) -> str | None:
+    """What the family-wise test held back, when no candidate is named:
+    the candidate furthest beyond its own bound (`null_bound`), if any, with
+    the subject's and the group's scores (`calibration.thresholds`) -- a
+    lead to check with another test, not a finding.  None when no candidate
+    exceeds its own bound."""
+    own = [e for e in ranking if e["evidence"] > e["null_bound"]]
+    if not own or fam.get("score") is None:
+        return None
+    e = max(own, key=lambda e: e["evidence"] / e["null_bound"])
+    return (f"{e['effect']} exceeds its own bound ({e['evidence']:.0f} against "
+            f"{e['null_bound']:.0f}) but the subject stands out of the group less than the "
+            f"group's own most outlying subjects do (largest ratio of evidence to bound "
+            f"{fam['subject_score']:.2f} against {fam['score']:.2f}; family-wise test): not "
+            f"named, a lead to check with another test")
