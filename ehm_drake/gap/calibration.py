@@ -144,6 +144,8 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
     must exceed it.  It depends on the subject's evidence (through the
     augmented bounds), so it is the subject's own."""
     names = list(nulls)
+    if not names:
+        return {}, {}, {"score": None, "rank": None, "level": None, "subjects": 0}
     n = len(names)
     sizes = {len(nulls[c]) for c in names}
     if len(sizes) > 1:
@@ -155,8 +157,6 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
         raise DiagnosisError(f"no evidence for candidates {missing}")
     bounds = {c: null_threshold(nulls[c], n, alpha, name=c, borrowed_spread=borrowed_spread)
               for c in names}
-    if not names:
-        return {}, {}, {"score": None, "rank": None, "level": None, "subjects": 0}
     aug = {c: null_threshold(_all_but_the_largest([*nulls[c], evidence[c]]), n, alpha, name=c,
                              borrowed_spread=borrowed_spread) for c in names}
     k_subj = sizes.pop()

@@ -575,16 +575,16 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
     base = results["none"]
     n_rows = len(rows)
     ranking = []
-    spread = group_null_spread({n: nulls.get(n, []) for n in names})
-    evidence_of = {n: _evidence(results[n], results["none"]) for n in names}
-    thr, bounds, fam = thresholds({n: nulls.get(n, []) for n in names}, evidence_of,
-                                  borrowed_spread=spread)
+    # Each candidate's null: per reference subject, in the group's order.
+    null_of = {n: list(nulls.get(n, [])) for n in names}
+    spread = group_null_spread(null_of)
+    evidence_of = {n: _evidence(results[n], base) for n in names}
+    thr, bounds, fam = thresholds(null_of, evidence_of, borrowed_spread=spread)
     for n in names:
         r = results[n]
         cand = Candidate(tuple(n.split("+")))
         gain = _gain(r, base)
-        evidence = _evidence(r, base)
-        null = list(nulls.get(n, []))  # per reference subject, in the group's order
+        evidence, null = evidence_of[n], null_of[n]
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
         k = len(cand.params)
