@@ -1050,6 +1050,8 @@ def test_the_family_wise_test_refuses_nulls_of_unequal_subjects():
         thresholds({"a": [0.0, 1.0, 2.0], "b": [0.0, 1.0]}, {"a": 0.0, "b": 0.0})
     with pytest.raises(DiagnosisError, match="no evidence"):
         thresholds({"a": [0.0, 1.0, 2.0]}, {})
+    with pytest.raises(DiagnosisError, match="not finite for {'a': nan}"):
+        thresholds({"a": [0.0, 1.0, 2.0]}, {"a": float("nan")})
     null = {"a": [0, 3, 5, 8, 12, 20, 35, 160.0], "b": [0.0] * 8}
     thr, bounds, fam = thresholds(null, {"a": 0.0, "b": 0.0})
     assert fam["rank"] == 8 and fam["level"] == pytest.approx(1 / 9)

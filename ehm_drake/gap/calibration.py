@@ -155,6 +155,11 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
     missing = [c for c in names if c not in evidence]
     if missing:
         raise DiagnosisError(f"no evidence for candidates {missing}")
+    bad = {c: evidence[c] for c in names
+           if evidence[c] is None or not math.isfinite(evidence[c])}
+    if bad:
+        raise DiagnosisError(f"the subject's evidence is not finite for {bad}: its fit "
+                             "failed; no threshold can judge it")
     bounds = {c: null_threshold(nulls[c], n, alpha, name=c, borrowed_spread=borrowed_spread)
               for c in names}
     aug = {c: null_threshold(_all_but_the_largest([*nulls[c], evidence[c]]), n, alpha, name=c,
