@@ -117,32 +117,44 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
     2. a full conformal test of the family (Vovk, Gammerman & Shafer 2005;
        Lei et al. 2018), which holds the family-wise level whatever the
        gains' distribution.  The K + 1 subjects -- the group's and this
-       one -- are scored alike: each candidate's bound is computed on the
-       K + 1 values of its evidence less the largest (a symmetric function
-       of all of them, so the scores stay exchangeable, which a bound from
-       the group's K values alone does not keep: simulated, 30% false
-       alarms against 1/17; and one that no single subject moves, so a
-       strong effect's score is not capped by its own value), and a
-       subject's score is its largest ratio of evidence to that bound over
-       the candidates.  A subject without any effect is exchangeable with the
+       one -- are scored alike: each candidate's scale (`family_scales`)
+       is its runner-up among the K + 1 values of its evidence (the
+       largest of them less the largest), at least the candidates' median
+       runner-up and `MIN_GAIN`; a subject's score is its largest ratio of
+       evidence to scale over the candidates.  The scales are symmetric
+       functions of the K + 1 subjects, so the scores stay exchangeable
+       (scales from the group's K values alone do not keep that:
+       simulated, 30% false alarms against 1/17), and no single subject
+       moves them, so a strong effect's score is not capped by its own
+       value.  A subject without any effect is exchangeable with the
        group's, so its score exceeds the k-th smallest of theirs, k =
        ceil((1 - alpha)(K + 1)), with probability at most 1 - k / (K + 1)
        <= alpha (with K < 1 / alpha - 1 subjects the largest is used and
        the level is 1 / (K + 1)).  For candidate c this reads: evidence >
-       (its augmented bound) x (that k-th score).  (Each reference
-       subject's evidence is against K - 1 others, the subject's against
-       K: the reference subjects' scores are, if anything, the larger, and
-       the test the more cautious.)  When the subject's evidence is its
-       candidate's largest, that bound is the candidate's own bound.
+       (its scale) x (that k-th score).  (Each reference subject's
+       evidence is against K - 1 others, the subject's against K: the
+       reference subjects' scores are, if anything, the larger, and the
+       test the more cautious.)
+
+       The scale is the runner-up, not a parametric bound on the K + 1
+       values less the largest (stop 55's form): a candidate whose null
+       has a heavy cluster (on `spine5`, backrest separation: 13 of 16
+       subjects at 0, two at 436 and 1,005) then scores its outlier
+       against the cluster (1,005 / 436), not against a bound that the
+       cluster itself exceeds (1,005 / 309), and a candidate with a tight
+       null (visceral mass: at most 186 on the group) scores an effect
+       against that null, not against a bound twice its largest value.
+       The median floor keeps a lone subject on an otherwise silent
+       candidate (runner-up 0) from setting everyone's bar.
 
     Why: the per-candidate bounds assume a distribution of the gains, and
     the nulls of a body that is not the model are mixtures -- most subjects
     0 (the fit stays "off"), a few far above -- whose tails no bound from K
     values captures: on `spine5`'s seed-2061 group of 16 they let 6 of 30
     fresh no-effect subjects have an effect named (20%).  The threshold
-    reported is max(bound, augmented bound x k-th score): the evidence
-    must exceed it.  It depends on the subject's evidence (through the
-    augmented bounds), so it is the subject's own."""
+    reported is max(bound, scale x k-th score): the evidence must exceed
+    it.  It depends on the subject's evidence (through the scales), so it
+    is the subject's own."""
     names = list(nulls)
     if not names:
         return {}, {}, {"score": None, "rank": None, "level": None, "subjects": 0}
@@ -162,21 +174,33 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
                              "failed; no threshold can judge it")
     bounds = {c: null_threshold(nulls[c], n, alpha, name=c, borrowed_spread=borrowed_spread)
               for c in names}
-    aug = {c: null_threshold(_all_but_the_largest([*nulls[c], evidence[c]]), n, alpha, name=c,
-                             borrowed_spread=borrowed_spread) for c in names}
+    scale = family_scales({c: [*nulls[c], evidence[c]] for c in names})
     k_subj = sizes.pop()
     ratio = np.full((k_subj, n), -np.inf)
     for i, c in enumerate(names):
         g = np.array([np.nan if x is None else x for x in nulls[c]], float)
         ok = np.isfinite(g)
-        ratio[ok, i] = g[ok] / aug[c]
+        ratio[ok, i] = g[ok] / scale[c]
     scores = np.sort(ratio.max(axis=1))
     k = min(k_subj, math.ceil((1 - alpha) * (k_subj + 1)))
     score = float(scores[k - 1])
-    thr = {c: max(bounds[c], aug[c] * score) for c in names}
+    thr = {c: max(bounds[c], scale[c] * score) for c in names}
     return thr, bounds, {"score": score, "rank": int(k), "level": float(1 - k / (k_subj + 1)),
                          "subjects": int(k_subj),
-                         "subject_score": float(max(evidence[c] / aug[c] for c in names))}
+                         "subject_score": float(max(evidence[c] / scale[c] for c in names))}
+
+
+def family_scales(values: dict) -> dict:
+    """Each candidate's scale in the family-wise test, from its K + 1
+    values ({candidate: values}, None left out): its runner-up (the
+    largest of them less the largest), at least the median runner-up of
+    the candidates and `MIN_GAIN`."""
+    runner_up = {}
+    for c, vals in values.items():
+        v = _all_but_the_largest(vals)
+        runner_up[c] = v[-1] if v else -math.inf
+    floor = max(MIN_GAIN, float(np.median(list(runner_up.values()))))
+    return {c: max(floor, r) for c, r in runner_up.items()}
 
 
 def _all_but_the_largest(values) -> list:

@@ -39,11 +39,12 @@ with the group; the model gives only the *shape* of each candidate effect:
    `calibration.null_threshold`), and `MIN_GAIN`.  A candidate that no
    reference subject fits (every null gain 0) borrows the group's typical
    spread.  And the subject must stand out of the group as a whole: its
-   largest ratio of evidence to bound over the candidates must exceed the
+   largest ratio of evidence to scale over the candidates must exceed the
    k-th smallest, k = ceil(0.9 (K + 1)), of the group's subjects' (the
-   largest at K = 16; the bounds from the K + 1 values) -- a full
-   conformal test that holds the family-wise level whatever the gains'
-   distribution (`calibration.thresholds`).
+   largest at K = 16; a candidate's scale is its runner-up among the K + 1
+   subjects, `calibration.family_scales`) -- a full conformal test that
+   holds the family-wise level whatever the gains' distribution
+   (`calibration.thresholds`).
 6. Verdict: `explained` (among the candidates beyond their null, the one
    furthest beyond its threshold, evidence less threshold), `ambiguous`
    (another within `AMBIGUITY_MARGIN` of its held-out share),

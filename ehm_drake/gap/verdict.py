@@ -139,6 +139,6 @@ def held_back_note(ranking: list[dict], fam: dict) -> str | None:
     e = max(own, key=lambda e: e["evidence"] / e["null_bound"])
     return (f"{e['effect']} exceeds its own bound ({e['evidence']:.0f} against "
             f"{e['null_bound']:.0f}) but the subject stands out of the group less than the "
-            f"group's own most outlying subjects do (largest ratio of evidence to bound "
+            f"group's own most outlying subjects do (largest ratio of evidence to scale "
             f"{fam['subject_score']:.2f} against {fam['score']:.2f}; family-wise test): not "
             f"named, a lead to check with another test")
