@@ -1065,12 +1065,13 @@ def test_a_heavy_cluster_on_one_candidate_does_not_hide_an_effect_on_another():
     seed-2061 effect run, its evidence 1.6 times its own bound) was held
     back by stop 55's scales, which scored the separation's 1,005 against a
     bound (309) that its own cluster exceeds; with the runner-up scales it
-    is named (538 / 186 against 1,005 / 436), and the no-effect subjects of
-    the same group are not."""
+    is named (538 / 186 against 1,005 / 436).  (The group's 30 fresh
+    no-effect subjects under the same rule:
+    `test_the_family_wise_test_on_measured_no_effect_subjects`.)"""
     from ehm_drake.gap.calibration import thresholds
 
     entry = json.loads((DATA / "spine5_null_evidence.json").read_text())
-    (key, group), = entry.items()
+    (group,) = entry.values()
     nulls = group["null_gains"]
     assert sorted(nulls["backrest_separation"])[-2:] == pytest.approx([436.5, 1005.3], abs=0.1)
     assert max(nulls["visceral_mass"]) == pytest.approx(186.1, abs=0.1)
