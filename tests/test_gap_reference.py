@@ -1056,6 +1056,7 @@ def test_family_scales_are_runner_ups_floored_by_their_median():
     shuffled = {c: list(rng.permutation(np.array(v, dtype=object))) for c, v in vals.items()}
     assert family_scales(shuffled) == sc
     assert family_scales({"a": [0.0, 1.0], "b": [2.0, -4.0]}) == {"a": MIN_GAIN, "b": MIN_GAIN}
+    assert family_scales({}) == {}
 
 
 def test_a_heavy_cluster_on_one_candidate_does_not_hide_an_effect_on_another():

@@ -194,7 +194,9 @@ def family_scales(values: dict) -> dict:
     """Each candidate's scale in the family-wise test, from its K + 1
     values ({candidate: values}, None left out): its runner-up (the
     largest of them less the largest), at least the median runner-up of
-    the candidates and `MIN_GAIN`."""
+    the candidates and `MIN_GAIN` ({} for no candidate)."""
+    if not values:
+        return {}
     runner_up = {}
     for c, vals in values.items():
         v = _all_but_the_largest(vals)
