@@ -148,6 +148,35 @@ def test_bounds_are_physiological(params):
         assert lo < 1.0 < hi, fp.name
 
 
+def test_apply_scales_is_the_typed_mapping_route_without_its_cost(params):
+    """`apply_scales` builds the scaled parameters field by field: the same
+    values, bit for bit, as scaling the mapping and typing it again with
+    `params_from_dict` (its route until stop 57), the start left as it was,
+    and a scale that leaves a range refused as before."""
+    from ehm_drake.identification.parameters import load_registry
+    from ehm_drake.params import params_from_dict
+
+    registry, _ = load_registry()
+    free = list(registry.values())
+    before = params.to_dict()
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        scales = np.exp(rng.uniform(-0.4, 0.4, len(free)))
+        d = params.to_dict()
+        for fp, s in zip(free, scales, strict=True):
+            for path in fp.paths:
+                *parents, last = path.split(".")
+                node = d
+                for k in parents:
+                    node = node[k]
+                v = node[last]
+                node[last] = [x * float(s) for x in v] if isinstance(v, list) else v * float(s)
+        assert apply_scales(params, free, scales) == params_from_dict(d)
+    assert params.to_dict() == before
+    with pytest.raises(ParameterError, match="lumbar"):
+        apply_scales(params, resolve_free("lumbar_stiffness"), [-1.0])
+
+
 def test_fit_command_end_to_end(tmp_path, params):
     data_dir = tmp_path / "lab"
     data_dir.mkdir()

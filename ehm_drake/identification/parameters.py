@@ -9,6 +9,7 @@ starting values.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..params import ModelParams, ParameterError, params_from_dict
+from ..params import ModelParams, ParameterError, validate
 
 
 @dataclass(frozen=True)
@@ -68,13 +69,6 @@ def _get(d: dict, path: str):
     return d
 
 
-def _set(d: dict, path: str, value) -> None:
-    keys = path.split(".")
-    for k in keys[:-1]:
-        d = d[k]
-    d[keys[-1]] = value
-
-
 def values_of(params: ModelParams, free: FreeParameter) -> np.ndarray:
     """All components of a free parameter's vectors (flattened)."""
     d = params.to_dict()
@@ -105,10 +99,28 @@ def scale_bounds(params: ModelParams, free: FreeParameter) -> tuple[float, float
 
 
 def apply_scales(params: ModelParams, free: list[FreeParameter], scales) -> ModelParams:
-    """A copy of `params` with each free parameter's vectors scaled."""
-    d = params.to_dict()
+    """A copy of `params` with each free parameter's vectors scaled, and
+    validated (`params.validate`).  Built field by field: the same values as
+    through `params_from_dict` (which types a mapping by way of YAML, 40-60 ms
+    a call, a sixth of a fit's model evaluation), `params` itself unchanged."""
+    out = params
     for fp, s in zip(free, scales, strict=True):
         for path in fp.paths:
-            v = _get(d, path)
-            _set(d, path, [x * float(s) for x in v] if isinstance(v, list) else v * float(s))
-    return params_from_dict(d)
+            out = _scaled(out, path.split("."), float(s))
+    return validate(out)
+
+
+def _scaled(obj, keys: list[str], s: float):
+    """A copy of the dataclass `obj` with the number or vector at the path
+    `keys` multiplied by `s` (the other fields shared, as `dataclasses.replace`
+    does)."""
+    if not dataclasses.is_dataclass(obj) or not hasattr(obj, keys[0]):
+        raise ParameterError(f"no parameter {'.'.join(keys)} under {type(obj).__name__}")
+    v = getattr(obj, keys[0])
+    if len(keys) > 1:
+        v = _scaled(v, keys[1:], s)
+    elif isinstance(v, tuple):
+        v = tuple(x * s for x in v)
+    else:
+        v = v * s
+    return dataclasses.replace(obj, **{keys[0]: v})
