@@ -13,12 +13,13 @@ from ehm_drake.model.anthropometry import (
     BodyMeasures,
     build_body,
 )
-from ehm_drake.model.plant import CARDAN_JOINTS, add_seated_human, model_directory
+from ehm_drake.model.plant import CARDAN_JOINTS, add_seated_human
 from ehm_drake.model.sdf_writer import (
     HUMAN_CARDAN_SDF_NAME,
     HUMAN_SDF_NAME,
     SEAT_SDF_NAME,
     human_sdf,
+    model_directory,
     seat_sdf,
 )
 from ehm_drake.systems.joints import cardan_to_generalized, rpy_rate_matrices
@@ -104,6 +105,34 @@ def test_sdf_on_disk_is_generated_from_the_anthropometry():
     assert (d / SEAT_SDF_NAME).read_text() == seat_sdf(body)
     assert (d / "package.xml").is_file()
 
+
+def test_the_packaged_text_gives_the_plant_the_url_gives():
+    """The model is parsed from the packaged files' text (`packaged_sdf`,
+    fast), not from their `package://` URLs: the same bodies, masses,
+    inertias and joints either way."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from ehm_drake.model.sdf_writer import PACKAGE_NAME, configure_parser, packaged_sdf
+
+    def plant_of(load):
+        plant = MultibodyPlant(0.001)
+        parser = configure_parser(Parser(plant))
+        for name in (HUMAN_SDF_NAME, SEAT_SDF_NAME):
+            load(parser, name)
+        plant.Finalize()
+        ctx = plant.CreateDefaultContext()
+        bodies = [plant.get_body(i) for i in plant.GetBodyIndices(plant.GetModelInstanceByName(
+            "ehm_human"))]
+        return ([(b.name(), b.CalcSpatialInertiaInBodyFrame(ctx).CopyToFullMatrix6().tobytes())
+                 for b in bodies],
+                [plant.get_joint(j).name() for j in plant.GetJointIndices()])
+
+    by_text = plant_of(lambda p, n: p.AddModelsFromString(packaged_sdf(n), "sdf"))
+    by_url = plant_of(lambda p, n: p.AddModels(url=f"package://{PACKAGE_NAME}/{n}"))
+    assert by_text == by_url
+    # The 12 segments and the spinal slider's 0.1 g link.
+    assert len(by_text[0]) == 13 and ("spine_slider" in dict(by_text[0]))
 
 @pytest.mark.parametrize("mass,stature", [(60.0, 1.62), (100.0, 1.90)])
 def test_scaled_body(params, mass, stature):
@@ -214,7 +243,7 @@ def test_the_sdf_folder_resolves_outside_the_checkout(tmp_path):
 
     out = subprocess.run(
         [sys.executable, "-c",
-         "from ehm_drake.model.plant import model_directory; print(model_directory())"],
+         "from ehm_drake.model.sdf_writer import model_directory; print(model_directory())"],
         cwd=tmp_path, capture_output=True, text=True, check=True).stdout.strip()
     folder = Path(out)
     assert (folder / "package.xml").is_file(), out

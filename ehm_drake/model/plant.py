@@ -1,7 +1,7 @@
 """Load the seated human and its seat into a MultibodyPlant.
 
 `add_seated_human(builder, params)` parses the SDF (the 50th-percentile male
-by `package://ehm_drake/...` URL, or a scaled body generated from it), adds
+from the packaged files, or a scaled body generated from it), adds
 the pelvis' free joint (roll-pitch-yaw floating, so all 31 DoFs are minimal
 coordinates), the joint damping, and the contact properties of the
 body-seat contact pairs, and finalizes the plant.
@@ -39,12 +39,9 @@ names none.
 
 from __future__ import annotations
 
-import functools
 import math
 import warnings
 from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
 
 import numpy as np
 from pydrake.geometry import (
@@ -83,7 +80,9 @@ from .sdf_writer import (
     HUMAN_SDF_NAME,
     SEAT_SDF_NAME,
     cardan_joint,
+    configure_parser,
     human_sdf,
+    packaged_sdf,
     seat_sdf,
 )
 from .stepping import (
@@ -97,7 +96,6 @@ from .stepping import (
     step_split,
 )
 
-PACKAGE_NAME = "ehm_drake"
 #: Nominal share of body weight carried by each contact pair in the erect,
 #: high-support posture (about half under the ischia, a tenth per thigh, a
 #: few percent per foot and per pad; the static split of this model after
@@ -116,32 +114,6 @@ NOMINAL_LOAD_SHARE = {
 #: the seat is very stiff and each body ellipsoid's stiffness is raised so the
 #: pair's combined stiffness is exactly its parameter value.
 SEAT_POINT_STIFFNESS = 1e10
-
-
-def model_directory() -> Path:
-    """The folder holding package.xml and the SDF files (`sdf/` in the repo).
-
-    Installed, it is the package `ehm_drake.sdf`; when the source tree's
-    `ehm_drake` shadows the installed one (running from the checkout), it is
-    the checkout's `sdf/` folder.
-    """
-    try:
-        # `ehm_drake.sdf` has no __init__.py: files() gives a MultiplexedPath, whose
-        # str() is not a path; a file in it is.
-        folder = Path(str(resources.files("ehm_drake.sdf").joinpath("package.xml"))).parent
-        if (folder / "package.xml").is_file():
-            return folder
-    except ModuleNotFoundError:
-        pass
-    return Path(__file__).resolve().parents[2] / "sdf"
-
-
-def configure_parser(parser: Parser) -> Parser:
-    """Make `package://ehm_drake/...` resolvable for `parser`."""
-    pm = parser.package_map()
-    if not pm.Contains(PACKAGE_NAME):
-        pm.Add(PACKAGE_NAME, str(model_directory()))
-    return parser
 
 
 def _joint_axes(joint) -> list[int]:
@@ -248,17 +220,6 @@ class HumanPlant:
         return self.plant.num_velocities()
 
 
-@functools.cache
-def _packaged_sdf(name: str) -> str:
-    """The text of a packaged SDF file (read once per process).  Parsed
-    from a string, a model takes under 1 ms; from its file or
-    `package://` URL 40-55 ms each time (Drake 1.51: the file route costs
-    about that much per call, whatever the file's size -- the 2.6 kB seat
-    as much as the 15 kB human), a third of a fit's model evaluation.  The
-    files have no URIs of their own to resolve."""
-    return (model_directory() / name).read_text()
-
-
 def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
                  extensions: tuple[ModelExtension, ...], cardan: bool):
     """The packaged SDF for the reference body without extensions, else
@@ -267,8 +228,8 @@ def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
     parser = configure_parser(Parser(plant))
     if measures == REFERENCE and not extensions:
         name = HUMAN_CARDAN_SDF_NAME if cardan else HUMAN_SDF_NAME
-        (human,) = parser.AddModelsFromString(_packaged_sdf(name), "sdf")
-        (seat,) = parser.AddModelsFromString(_packaged_sdf(SEAT_SDF_NAME), "sdf")
+        (human,) = parser.AddModelsFromString(packaged_sdf(name), "sdf")
+        (seat,) = parser.AddModelsFromString(packaged_sdf(SEAT_SDF_NAME), "sdf")
     else:
         seat_options = merge_options(extensions, "seat_options")
         (human,) = parser.AddModelsFromString(
