@@ -101,8 +101,8 @@ def scale_bounds(params: ModelParams, free: FreeParameter) -> tuple[float, float
 def apply_scales(params: ModelParams, free: list[FreeParameter], scales) -> ModelParams:
     """A copy of `params` with each free parameter's vectors scaled, and
     validated (`params.validate`).  Built field by field: the same values as
-    through `params_from_dict` (which types a mapping by way of YAML, 40-60 ms
-    a call, a sixth of a fit's model evaluation), `params` itself unchanged."""
+    through `params_from_dict` (which types a mapping by way of YAML: about
+    9 ms a call against 0.6 ms), `params` itself unchanged."""
     out = params
     for fp, s in zip(free, scales, strict=True):
         for path in fp.paths:
