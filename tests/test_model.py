@@ -134,6 +134,7 @@ def test_the_packaged_text_gives_the_plant_the_url_gives():
     # The 12 segments and the spinal slider's 0.1 g link.
     assert len(by_text[0]) == 13 and ("spine_slider" in dict(by_text[0]))
 
+
 @pytest.mark.parametrize("mass,stature", [(60.0, 1.62), (100.0, 1.90)])
 def test_scaled_body(params, mass, stature):
     hp = add_seated_human(DiagramBuilder(), params, BodyMeasures(mass, stature))

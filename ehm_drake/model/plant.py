@@ -80,7 +80,6 @@ from .sdf_writer import (
     HUMAN_SDF_NAME,
     SEAT_SDF_NAME,
     cardan_joint,
-    configure_parser,
     human_sdf,
     packaged_sdf,
     seat_sdf,
@@ -225,7 +224,9 @@ def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
     """The packaged SDF for the reference body without extensions, else
     SDF generated from `body` (and the extensions' seat options); with
     `cardan`, the human's joints as Cardan chains of revolute joints."""
-    parser = configure_parser(Parser(plant))
+    # The SDFs refer to no file or `package://` URL: the parser needs no
+    # package map (`configure_parser` costs 0.25 ms a build).
+    parser = Parser(plant)
     if measures == REFERENCE and not extensions:
         name = HUMAN_CARDAN_SDF_NAME if cardan else HUMAN_SDF_NAME
         (human,) = parser.AddModelsFromString(packaged_sdf(name), "sdf")

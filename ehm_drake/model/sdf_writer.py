@@ -51,6 +51,7 @@ PACKAGE_NAME = "ehm_drake"
 
 SKIN = "0.87 0.72 0.60 1"
 SEAT_COLOR = "0.25 0.28 0.33 1"
+PAD_COLOR = "0.15 0.45 0.70 1"
 
 
 def model_directory() -> Path:
@@ -85,10 +86,9 @@ def packaged_sdf(name: str) -> str:
     """The text of a packaged SDF file, read once per process.  Drake 1.51
     parses a model from its text in under 1 ms (the seat) to about 10 ms
     (the human), from its file or `package://` URL in 40-55 ms each time
-    whatever its size: a third of a fit's model evaluation until stop 57.
-    The files refer to no other file."""
+    whatever its size: about a quarter of a fit's model evaluation until
+    stop 57.  The files refer to no other file."""
     return (model_directory() / name).read_text()
-PAD_COLOR = "0.15 0.45 0.70 1"
 
 
 def _f(x: float) -> str:
