@@ -16,6 +16,14 @@ a change to the threshold rule alone, measured on the same fits.
 It prints one line per trial and the summary (top-1, top-3, false alarms)
 judged against the run's bar; `--out` writes the per-trial reports' scores.
 
+With ``--rethreshold --contrasts DIR`` (contrast measurements of the run's
+reference subjects, `ehm_drake.gap.contrasts`; e.g. made afterwards for the
+stored group with `blind --contrasts` settings) the effects in DIR are scored
+again with their measured signatures on each trial's stored data and the
+group's leave-one-out null, the other candidates keep their stored evidence,
+and all are judged again: the contrasts' worth measured on the same trials,
+without re-fitting the model (seconds a trial).
+
 With ``--reference DIR [DIR ...]`` the trials are diagnosed against the
 reference subjects in those folders (a run's ``reference`` folder, or subject
 folders) instead of the run's own group: a change of the group (its size, its
@@ -41,6 +49,33 @@ def _trial_set(text: str | None):
     return out
 
 
+def _with_contrasts(report, data, group, contrasts, nulls, scorer) -> None:
+    """Replace, in a stored report, the evidence and null gains of the
+    effects that have contrasts with their measured signatures'."""
+    import numpy as np
+
+    from ehm_drake.gap.contrasts import contrast_evidence
+    from ehm_drake.gap.diagnose import load_lab_data
+    from ehm_drake.gap.group import wrap_log
+    from ehm_drake.gap.localize import cell_keys, gap_value
+
+    keys = cell_keys(group.rows)
+    lab = load_lab_data(data)
+    r = wrap_log(np.log(lab.rows.H[group.align(lab)]) - group.mean_log)
+    base = scorer.baseline(r)
+    g0 = gap_value(base["chi_heldout"], keys)
+    for e in report["ranking"]:
+        if e["effect"] in contrasts.effects:
+            res = scorer.score(r, e["effect"], contrasts.signature(e["effect"]))
+            e.update(evidence=contrast_evidence(res, base), null_gains=nulls[e["effect"]],
+                     heldout_gain=float(np.nansum(base["chi_heldout"])
+                                        - np.nansum(res["chi_heldout"])),
+                     level_gain=res["level_gain"], signature="contrasts",
+                     params=res["params"],
+                     gap_reduction_heldout=float(1 - gap_value(res["chi_heldout"], keys) / g0)
+                     if g0 > 0 else 0.0)
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -51,6 +86,9 @@ def main(argv=None) -> int:
     p.add_argument("--rethreshold", action="store_true",
                    help="judge the stored reports again with the current thresholds instead "
                         "of re-diagnosing (reference-group runs)")
+    p.add_argument("--contrasts", type=Path, default=None,
+                   help="with --rethreshold: score the effects in this contrasts folder "
+                        "(DIR/<effect>/<subject>/) with their measured signatures")
     p.add_argument("--reference", type=Path, nargs="+", default=None,
                    help="diagnose against these reference folders instead of the run's own "
                         "group (re-diagnoses)")
@@ -67,6 +105,9 @@ def main(argv=None) -> int:
     candidates = settings.get("candidates")
     if args.rethreshold and not settings.get("references"):
         p.error("--rethreshold needs a run against a reference group")
+    if args.contrasts and not args.rethreshold:
+        p.error("--contrasts is for --rethreshold (a re-diagnosis finds the run's own "
+                "reference/contrasts folder)")
     if args.reference and args.rethreshold:
         p.error("--reference re-diagnoses; it cannot be combined with --rethreshold")
     if args.reference:
@@ -77,6 +118,15 @@ def main(argv=None) -> int:
     else:
         group = (load_reference([args.run / "reference"])
                  if settings.get("references") and not args.rethreshold else None)
+    contrasts = None
+    if args.contrasts:
+        from ehm_drake.gap.contrasts import ContrastScorer, contrast_nulls, load_contrasts
+
+        group = load_reference([args.run / "reference"])
+        contrasts = load_contrasts(args.contrasts, group)
+        nulls = contrast_nulls(group, contrasts)
+        scorer = ContrastScorer(group)
+        print(f"contrasts: {contrasts.describe()}", flush=True)
     wanted = _trial_set(args.trials)
     results = []
     for rfile in sorted(args.run.glob("trial_*/result.json")):
@@ -88,8 +138,10 @@ def main(argv=None) -> int:
             continue
         t0 = time.perf_counter()
         if args.rethreshold:
-            stored = rfile.parent / "diagnosis" / "report.json"
-            rep = rethreshold(json.loads(stored.read_text()))
+            stored = json.loads((rfile.parent / "diagnosis" / "report.json").read_text())
+            if contrasts is not None:
+                _with_contrasts(stored, rfile.parent / "data", group, contrasts, nulls, scorer)
+            rep = rethreshold(stored)
         elif group is not None:
             data = load_lab_data(rfile.parent / "data")
             diag = diagnose_with_reference(data, group, effects=candidates,

@@ -368,7 +368,7 @@ def test_blind_run_records_a_diverging_reality_trial_and_goes_on(tmp_path, monke
 CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "cocontraction")
 SHORT_BLIND = dict(trials=1, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
                    hidden=("seat_foam_stiffening",), candidates=CANDIDATES,  # seed 21: none
-                   p_none=0.34, p_two=0.0, reality="lumped", references=4)
+                   p_none=0.34, p_two=0.0, reality="lumped", references=4, contrasts=2)
 
 
 @pytest.fixture(scope="module")
@@ -405,6 +405,22 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
     for e in rep["ranking"]:
         assert len(e["null_gains"]) == 4 and e["null_threshold"] >= 16.3
         assert e["beyond_null"] == (e["evidence"] > e["null_threshold"])
+    # The two imposable candidates were measured on 2 group subjects each (in
+    # a second sitting) and are scored with those signatures; the visceral
+    # mass, which no protocol imposes, with the model's.
+    assert rep["reference"]["contrasts"]["subjects"] == {"cocontraction": 2,
+                                                         "seat_foam_stiffening": 2}
+    assert {e["effect"]: e["signature"] for e in rep["ranking"]} == {
+        "cocontraction": "contrasts", "seat_foam_stiffening": "contrasts",
+        "visceral_mass": "model"}
+    for eff in ("cocontraction", "seat_foam_stiffening"):
+        made = sorted(p.name for p in (out / "reference" / "contrasts" / eff).iterdir())
+        assert made == ["subject_00", "subject_01"]
+        key = json.loads((out / "keys" / f"contrast_{eff}_subject_00.json").read_text())
+        ref = json.loads((out / "keys" / "reference_subject_00.json").read_text())
+        assert key["seed"] == ref["seed"] and key["session"] == 1
+        assert key["effects"][eff]["strength"] > 0
+    assert "measured again" in (out / "blind.md").read_text()
     assert "Reference group" in (none / "diagnosis" / "report.md").read_text()
     # A group of 4 is below the recommended 16: the report says so.
     assert "4 subjects" in rep["reference"]["caution"]

@@ -49,6 +49,15 @@ from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 #: backrest_separation leaves no significant gap even at strength 1, and
 #: seat_friction only at the top of it.
 DETECTABLE_STRENGTH = (0.6, 1.0)
+#: Effects a lab can impose on a reference subject and measure again (the
+#: contrasts of `gap.contrasts`): hands on the thighs or not, tensed or
+#: relaxed, leaning on the backrest or not, another cushion, foam or cover.
+#: Not a visceral mass or a reflex delay: no protocol adds or takes them away.
+IMPOSABLE_EFFECTS = ("arms", "cocontraction", "backrest_separation", "seat_cushion_dynamics",
+                     "seat_foam_stiffening", "seat_friction")
+#: Strength of an imposed effect in a contrast: one known condition, the
+#: middle of the trials' range (`DETECTABLE_STRENGTH`).
+CONTRAST_STRENGTH = 0.8
 #: Acceptance of the issue (fractions) on data made by the model itself.
 ACCEPTANCE = {"top1": 0.80, "top3": 0.95, "false_alarm": 0.10, "heldout_reduction": 0.70}
 #: Acceptance on an independent reality (issue "Gap diagnosis on data from a
@@ -88,6 +97,12 @@ class BlindSpec:
     #: scatter, their own seeds) made once for the run; every trial is then
     #: diagnosed against it (`diagnose --reference`).  0: none.
     references: int = 0
+    #: Contrast subjects per imposable effect (`IMPOSABLE_EFFECTS` among the
+    #: candidates): the first ones of the reference group measured again, in
+    #: another sitting (its own excitation and noise), with the effect at
+    #: `CONTRAST_STRENGTH`; `diagnose` then scores those effects with their
+    #: measured signatures (`gap.contrasts`).  0: none.
+    contrasts: int = 0
     #: The model's parameters (`ModelParams.to_dict()`; None: the defaults):
     #: the model that makes the data on the model itself and the one
     #: `diagnose` fits, e.g. on the implicit design (``blind --design``).
@@ -106,6 +121,11 @@ class BlindSpec:
         if self.references and self.references < MIN_SUBJECTS:
             raise BlindError(f"--references must be 0 or >= {MIN_SUBJECTS}, got "
                              f"{self.references}")
+        from .contrasts import MIN_CONTRASTS
+        if self.contrasts and not MIN_CONTRASTS <= self.contrasts <= self.references:
+            raise BlindError(f"--contrasts must be 0 or from {MIN_CONTRASTS} to --references "
+                             f"({self.references}): they are the reference subjects measured "
+                             f"again, got {self.contrasts}")
         for n in self.hidden:
             if n not in EFFECTS:
                 raise BlindError(f"unknown effect {n!r}; choose from {', '.join(EFFECTS)}")
@@ -367,7 +387,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     settings = json.loads(json.dumps(settings))
     sfile = out / "blind_settings.json"
     if sfile.is_file():
-        old = {"reality": MODEL_REALITY, "references": 0, "params": None,
+        old = {"reality": MODEL_REALITY, "references": 0, "params": None, "contrasts": 0,
                **json.loads(sfile.read_text())}
         if {k: v for k, v in old.items() if k != "trials"} != \
                 {k: v for k, v in settings.items() if k != "trials"}:
@@ -380,6 +400,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         (out / "params.json").write_text(json.dumps(spec.params, indent=1) + "\n")
     trials = plan(spec)
     reference = _reference_group(spec, out, progress, params) if spec.references else None
+    if spec.contrasts:
+        _contrast_subjects(spec, out, progress, params)
     results = []
     prog = Progress("blind", len(trials), progress, unit="trials")
     for k, tr in enumerate(trials):
@@ -477,6 +499,39 @@ def _reference_group(spec: BlindSpec, out: Path, progress: bool, params=None) ->
     return folder
 
 
+def _contrast_subjects(spec: BlindSpec, out: Path, progress: bool, params=None) -> None:
+    """Measure the first `spec.contrasts` subjects of the reference group
+    again with each imposable candidate effect, into
+    out/reference/contrasts/<effect>/<subject> (keys in out/keys).  A
+    subject on which the reality diverges is replaced by the next one."""
+    folder = out / "reference"
+    subjects = sorted(p.name for p in folder.glob("subject_*") if (p / "frf.csv").is_file())
+    effects = [e for e in IMPOSABLE_EFFECTS if spec.candidates is None or e in spec.candidates]
+    prog = Progress("blind: contrasts", spec.contrasts * len(effects), progress,
+                    unit="subjects")
+    for effect in effects:
+        made = 0
+        for name in subjects:
+            if made == spec.contrasts:
+                break
+            seed = json.loads((out / "keys" / f"reference_{name}.json").read_text())["seed"]
+            try:
+                _synthesize_once(SynthSpec({effect: CONTRAST_STRENGTH}, seed, tuple(spec.levels),
+                                           spec.directions, spec.duration_s,
+                                           reality=spec.reality, session=1),
+                                 folder / "contrasts" / effect / name,
+                                 out / "keys" / f"contrast_{effect}_{name}.json",
+                                 spec.workers, params)
+            except RealityError as e:
+                prog.say(f"contrast {effect} on {name} skipped: {e}")
+                continue
+            made += 1
+            prog.step(f"{effect} on {name}")
+        if made < spec.contrasts:
+            raise BlindError(f"the reality diverged on too many contrast subjects of {effect} "
+                             f"({made} of {spec.contrasts} made)")
+
+
 def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None,
                      params=None) -> None:
     """`synthesize` into `data` and `key` unless a finished data folder is
@@ -532,7 +587,10 @@ def markdown(summary: dict, results: list[dict]) -> str:
                 f"simulation diverged (listed below, not scored)."]
                if s.get("skipped_trials") else []),
              *(["", f"Diagnosed against a reference group of "
-                f"{s['settings']['references']} subjects (`diagnose --reference`)."]
+                f"{s['settings']['references']} subjects (`diagnose --reference`)"
+                + (f"; {s['settings']['contrasts']} of them measured again with each "
+                   "imposable effect, whose measured signatures replace the model's "
+                   "(`gap.contrasts`)." if s["settings"].get("contrasts") else ".")]
                if s.get("settings", {}).get("references") else []),
              *(["", f"The model: the {sim['design']} design at a "
                 f"{1e3 * sim['time_step_s']:g} ms step (`params.json`)."] if sim else []),

@@ -47,6 +47,12 @@ def add_gap_arguments(sub) -> None:
                    "measured with the same protocol (subject folders, or a folder of them; at "
                    "least 4, 16 recommended). The subject is compared with the group, the "
                    "model gives only the shape of each candidate (see ehm_drake.gap.reference)")
+    p.add_argument("--contrasts", metavar="DIR", default=None,
+                   help="with --reference: contrast measurements of the group's subjects, "
+                   "DIR/<effect>/<subject>/ (the subject measured again with the effect "
+                   "imposed; at least 2 per effect). Those effects are scored with their "
+                   "measured signatures instead of the model's (default: the reference "
+                   "folder's own 'contrasts' folder, if any; see ehm_drake.gap.contrasts)")
     p.add_argument("--no-discrepancy", action="store_true",
                    help="leave out the model-form discrepancy (an unexplained gap stays "
                    "unexplained instead of being tested as a structural one)")
@@ -102,6 +108,11 @@ def add_gap_arguments(sub) -> None:
                    help="make a reference group of K subjects without effects (same body and "
                    "protocol, their own seeds) and diagnose every trial against it "
                    "(diagnose --reference); default 0: no reference group; 16 recommended")
+    p.add_argument("--contrasts", type=int_at_least(0), default=0, metavar="N",
+                   help="with --references: measure the first N reference subjects again with "
+                   "each effect a lab can impose (arms, co-contraction, backrest separation, "
+                   "the seat effects); diagnose scores those with their measured signatures "
+                   "(diagnose --contrasts); default 0")
     p.add_argument("--params", metavar="FILE", help="the model's parameters: the model that "
                    "makes the data (on --reality ehm) and the one diagnose fits")
     add_design_arguments(p)
@@ -122,12 +133,15 @@ def cmd_diagnose(args) -> int:
 
     params = on_design(load_params(args.params), args.design, args.time_step)
     out = prepare_output_dir(args.out, args.force)
+    if args.contrasts and not args.reference:
+        raise UsageError("--contrasts needs --reference (the contrasts are measurements of "
+                         "the reference group's subjects)")
     if args.reference:
         from .reference import diagnose_with_reference
 
         diag = diagnose_with_reference(args.data, args.reference, params, args.effects,
                                        workers=args.workers, progress=not args.quiet,
-                                       use_cache=not args.no_cache)
+                                       use_cache=not args.no_cache, contrasts=args.contrasts)
     else:
         diag = diagnose(args.data, params, args.effects, workers=args.workers,
                         progress=not args.quiet, use_cache=not args.no_cache,
@@ -199,6 +213,7 @@ def cmd_blind(args) -> int:
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
                      workers=args.workers, reality=args.reality, references=args.references,
+                     contrasts=args.contrasts,
                      params=None if params is None else params.to_dict())
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):

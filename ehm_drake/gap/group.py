@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .diagnose import DiagnosisError, LabData, load_lab_data
-from .localize import Rows
+from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize
 
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.
@@ -206,3 +206,22 @@ def expand_reference_paths(paths) -> list[Path]:
 def load_reference(paths, channels: str = "plane") -> ReferenceGroup:
     return ReferenceGroup.from_labs([load_lab_data(p, channels)
                                      for p in expand_reference_paths(paths)])
+
+
+def model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
+    """Where the model (refit to the group) differs from the group mean:
+    the cells beyond the group mean's uncertainty plus the model floor, each
+    with its RMS log-gain difference."""
+    rows = group.rows
+    d = wrap_log(log_model - group.mean_log)
+    chi = np.abs(d) ** 2 / (group.variance / group.size + 2 * MODEL_FLOOR**2)
+    cells = localize(rows, chi)
+    lo = np.array([b[0] for b in BANDS])[rows.band]
+    for c in cells:
+        m = (rows.direction == c["direction"]) & (rows.segment == c["segment"]) & \
+            (rows.dof == c["dof"]) & (lo == c["f_lo_hz"])
+        c["rms_log_gain_difference"] = float(np.sqrt(np.mean(d.real[m] ** 2)))
+    return {"rms_log_gain_difference": float(np.sqrt(np.mean(d.real**2))),
+            "rms_phase_difference_deg": float(np.degrees(np.sqrt(np.mean(d.imag**2)))),
+            "gap": gap_value(chi, cell_keys(rows)), "cells": cells[:12],
+            "significant_cells": int(sum(c["significant"] for c in cells))}

@@ -30,7 +30,9 @@ with the group; the model gives only the *shape* of each candidate effect:
    higher level less the lowest, whitened by the group's own scatter of
    them, `_LevelDesign`), where the subject's structural difference from
    the group cancels.  Its evidence: the held-out chi^2 gain plus that
-   level gain (`_evidence`).
+   level gain (`_evidence`).  An effect the lab measured on some of the
+   group's subjects (`contrasts`) takes its measured signature instead of
+   the model's, scored the same way.
 5. Calibration from the group itself: each reference subject against the
    other K - 1 (leave one out) gives every candidate's evidence on
    subjects without any effect.  A candidate is named when its evidence
@@ -76,6 +78,7 @@ from .calibration import (
     group_null_spread,
     thresholds,
 )
+from .contrasts import ContrastScorer, contrast_nulls, find_contrasts, load_contrasts
 from .diagnose import (
     Diagnosis,
     DiagnosisError,
@@ -93,9 +96,10 @@ from .group import (
     ReferenceGroup,
     level_pairs,
     load_reference,
+    model_form,
     wrap_log,
 )
-from .localize import BANDS, MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
+from .localize import MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
 from .models import STRENGTH_PATH, Candidate, Predictor, Statics, coordinate
 from .scatter import (
     DESCENT_EVALUATIONS,
@@ -402,10 +406,13 @@ def null_gains(group: ReferenceGroup, families, slope, base_names, names, worker
 def diagnose_with_reference(data, reference, params: ModelParams | None = None, effects=None,
                             measures: BodyMeasures = REFERENCE, workers: int | None = None,
                             progress: bool = True, channels: str = "plane",
-                            use_cache: bool = True) -> Diagnosis:
+                            use_cache: bool = True, contrasts=None) -> Diagnosis:
     """Diagnose the subject in `data` against the reference group
     `reference` (a `ReferenceGroup`, or subject folders / a folder of them);
-    see the module doc."""
+    see the module doc.  `contrasts`: a folder of contrast measurements of
+    the group (`contrasts`; default the reference folder's own
+    ``contrasts``, if any): the effects it holds are scored with their
+    empirical signatures instead of the model's."""
     t_start = time.perf_counter()
     params = params if params is not None else load_params()
     names = candidate_names(effects)
@@ -413,12 +420,17 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
         load_reference(reference, channels)
     lab = data if isinstance(data, LabData) else load_lab_data(data, channels)
     idx = group.align(lab)
+    folder = contrasts if contrasts is not None else find_contrasts(reference)
+    contrasts = load_contrasts(folder, group, channels) if folder is not None else None
+    empirical = [n for n in names if contrasts is not None and n in contrasts.effects]
+    modelled = [n for n in names if n not in empirical]
     H = lab.rows.H[idx]
     if np.any(~np.isfinite(H)) or np.any(H == 0):
         raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in the data")
     say = Progress("diagnose", enabled=progress).say
     say(f"reference group of {group.size} subjects, {len(group.rows)} rows, "
-        f"{len(group.tests)} tests; {len(names)} candidates")
+        f"{len(group.tests)} tests; {len(names)} candidates"
+        + (f", {len(empirical)} with empirical signatures from contrasts" if empirical else ""))
     caution = group_size_caution(group.size)
     if caution:
         say(f"caution: {caution}")
@@ -446,22 +458,30 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     null_prog = Progress("diagnose: calibration on the group (leave one out)", group.size,
                          progress, unit="subjects")
     anchor_key = hashlib.sha256(json.dumps(anchor["log_scales"]).encode()).hexdigest()[:16]
-    nulls = null_gains(group, families, slope, base_names, names, workers,
+    nulls = null_gains(group, families, slope, base_names, modelled, workers,
                        lambda done, total: null_prog.update(done), use_cache, anchor_key)
     residual = wrap_log(np.log(H) - group.mean_log)
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
-             "names": names, "residual": residual}
-    fit_prog = Progress("diagnose: candidates", len(names) + 1, progress, unit="fitted")
+             "names": modelled, "residual": residual}
+    fit_prog = Progress("diagnose: candidates", len(modelled) + 1, progress, unit="fitted")
     results = {}
-    for r in run_jobs([(_subject_job, n) for n in ["none", *names]],
-                      min(worker_count(workers), len(names) + 1),
+    for r in run_jobs([(_subject_job, n) for n in ["none", *modelled]],
+                      min(worker_count(workers), len(modelled) + 1),
                       lambda done, total, i, r: fit_prog.step(f"({r['name']})"),
                       _init_worker, (state,)):
         results[r["name"]] = r
+    if empirical:
+        nulls.update({n: v for n, v in contrast_nulls(group, contrasts).items() if n in names})
+        scorer = ContrastScorer(group)
+        for n in empirical:
+            results[n] = scorer.score(residual, n, contrasts.signature(n))
     t_fit = time.perf_counter() - t1
     log_model = _Scorer(group, families, slope, base_names).log0
     report, before, after = _assemble(lab, group, idx, results, names, nulls, anchor,
                                       log_model, base_names)
+    if contrasts is not None:
+        report["reference"]["contrasts"] = {"source": contrasts.source,
+                                            "subjects": contrasts.describe()}
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
                           "total": time.perf_counter() - t_start,
                           "workers": min(worker_count(workers), len(names) + 1)}
@@ -473,25 +493,6 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     if best in results:
         shown[best] = {"H_all": np.exp(group.mean_log + results[best]["signature"])}
     return Diagnosis(report, rows, shown, base_names, before, after)
-
-
-def _model_form(group: ReferenceGroup, log_model: np.ndarray) -> dict:
-    """Where the model (refit to the group) differs from the group mean:
-    the cells beyond the group mean's uncertainty plus the model floor, each
-    with its RMS log-gain difference."""
-    rows = group.rows
-    d = wrap_log(log_model - group.mean_log)
-    chi = np.abs(d) ** 2 / (group.variance / group.size + 2 * MODEL_FLOOR**2)
-    cells = localize(rows, chi)
-    lo = np.array([b[0] for b in BANDS])[rows.band]
-    for c in cells:
-        m = (rows.direction == c["direction"]) & (rows.segment == c["segment"]) & \
-            (rows.dof == c["dof"]) & (lo == c["f_lo_hz"])
-        c["rms_log_gain_difference"] = float(np.sqrt(np.mean(d.real[m] ** 2)))
-    return {"rms_log_gain_difference": float(np.sqrt(np.mean(d.real**2))),
-            "rms_phase_difference_deg": float(np.degrees(np.sqrt(np.mean(d.imag**2)))),
-            "gap": gap_value(chi, cell_keys(rows)), "cells": cells[:12],
-            "significant_cells": int(sum(c["significant"] for c in cells))}
 
 
 def group_size_caution(size: int) -> str | None:
@@ -588,11 +589,13 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         evidence, null = evidence_of[n], null_of[n]
         g0_t, g_t = gap_value(base["chi_all"], keys), gap_value(r["chi_all"], keys)
         g0_h, g_h = gap_value(base["chi_heldout"], keys), gap_value(r["chi_heldout"], keys)
-        k = len(cand.params)
+        k = len(r["coords"])
         ranking.append({
             "effect": n,
-            "params": {e: {p: float(v) for p, v in vals.items()}
-                       for e, vals in cand.values(np.array(r["coords"])).items()},
+            "signature": "contrasts" if "params" in r else "model",
+            "params": r.get("params") or {
+                e: {p: float(v) for p, v in vals.items()}
+                for e, vals in cand.values(np.array(r["coords"])).items()},
             "gap_reduction_train": float(1 - g_t / g0_t) if g0_t > 0 else 0.0,
             "gap_reduction_heldout": float(1 - g_h / g0_h) if g0_h > 0 else 0.0,
             "delta_bic": float(-gain + k * math.log(2 * n_rows)),
@@ -600,7 +603,8 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "heldout_gain": gain, "level_gain": float(r.get("level_gain", 0.0)),
             "level_gain_at_fit": float(r.get("level_gain_at_fit", 0.0)),
             "amplitude_driven": cand.amplitude_driven,
-            "level_params": (None if r.get("level_coords") is None else
+            "level_params": (r.get("level_params") if "params" in r else
+                             None if r.get("level_coords") is None else
                              {e: {p: float(v) for p, v in vals.items()} for e, vals in
                               cand.values(np.array(r["level_coords"])).items()}),
             "evidence": evidence, "null_gains": null,
@@ -641,7 +645,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         explanation += "; " + held_back
     after = results[best["effect"]] if best else base
     cells_after = localize(rows, after["chi_all"])
-    model_form = _model_form(group, log_model)
+    form = model_form(group, log_model)
     report = {
         "verdict": verdict,
         "best_effect": best_effect,
@@ -656,7 +660,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         "ambiguous_with": ambiguous_with,
         "separating_experiment": None,
         "explanation": explanation,
-        "model_form": model_form,
+        "model_form": form,
         "reference": {"subjects": group.sources, "size": group.size,
                       "caution": group_size_caution(group.size),
                       "anchor_scales": dict(zip(base_names,

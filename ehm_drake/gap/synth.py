@@ -86,6 +86,9 @@ class SynthSpec:
     #: The body that makes the data: "ehm" (the model) or an independent
     #: reality's name (`ehm_drake.realities`).
     reality: str = MODEL_REALITY
+    #: A repeated sitting of the same subject (the same seed): 0 the first;
+    #: each other number draws its own excitation and sensor noise.
+    session: int = 0
 
     def validate(self) -> None:
         if self.reality != MODEL_REALITY:
@@ -115,6 +118,8 @@ class SynthSpec:
                              f"{SEGMENT_S:g} s), got {self.duration_s}")
         if not 0.0 <= self.spread < 0.5:
             raise SynthError(f"subject spread must be in [0, 0.5), got {self.spread}")
+        if not (isinstance(self.session, int) and self.session >= 0):
+            raise SynthError(f"session must be a whole number >= 0, got {self.session!r}")
 
     def effect_values(self) -> dict:
         return {n: effect_values(n, s) for n, s in self.effects.items() if s > 0}
@@ -130,8 +135,10 @@ def subject_parameters(params: ModelParams, seed: int, spread: float = SUBJECT_S
                                                   zip(free, factors, strict=True)}
 
 
-def _test_seeds(seed: int, n: int) -> list[int]:
-    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence([seed, 2]).spawn(n)]
+def _test_seeds(seed: int, n: int, session: int = 0) -> list[int]:
+    """The tests' excitation and noise seeds (a later `session`: others)."""
+    entropy = [seed, 2] if session == 0 else [seed, 2, session]
+    return [int(s.generate_state(1)[0]) for s in np.random.SeedSequence(entropy).spawn(n)]
 
 
 def level_label(level: float) -> str:
@@ -252,7 +259,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
         f"{'' if spec.reality == MODEL_REALITY else f'reality {spec.reality}, '}"
         f"subject seed {spec.seed}, effects: {desc}; settling")
     tests = [(d, lv) for d in spec.directions for lv in spec.levels]
-    seeds = _test_seeds(spec.seed, len(tests))
+    seeds = _test_seeds(spec.seed, len(tests), spec.session)
     if spec.reality == MODEL_REALITY:
         base = params if params is not None else load_params()
         subject, factors = subject_parameters(base, spec.seed, spec.spread)
@@ -311,6 +318,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
                     {"translation": "m/m", "rotation": "deg/m"})
     key = {
         "seed": spec.seed,
+        **({"session": spec.session} if spec.session else {}),
         **truth,
         "levels_rms": list(spec.levels),
         "directions": spec.directions,

@@ -1,0 +1,241 @@
+"""Empirical effect signatures from contrast measurements of the reference group.
+
+A lab can impose several candidate effects on some subjects of its reference
+group and measure them again with the same protocol: hands resting on the
+thighs or not (`arms`), tensed or relaxed (`cocontraction`), leaning on the
+backrest or not (`backrest_separation`), another cushion, foam or cover (the
+seat effects).  The change of one subject, delta = log H(with the effect) -
+log H(without), is the effect's signature on a human body, with no model in
+it.  Against a reference group the model-based signature (`reference._Scorer`:
+the EHM's change of log H at the group's anchor) is the weak part on bodies
+that are not the model: on the stored blind runs the effects missed carried
+enough change to pass every threshold had a candidate followed them (a perfect
+signature would have scored 3-60 times the family-wise bar on `lumped` seed
+2062's 13 misses), but the EHM's own versions of arms, co-contraction, visceral
+mass and reflex delay act elsewhere (docs/gap_diagnosis_realities.md, stop 58).
+
+Layout: a folder ``contrasts/<effect>/<subject>/`` (frf.csv or timeseries.csv,
+as a subject folder), where ``<effect>`` is a candidate's name and ``<subject>``
+the folder name of one of the reference group's subjects: the same subject
+measured with the effect.  At least `MIN_CONTRASTS` subjects per effect.
+
+Scoring (`ContrastScorer`): the signature s is the mean delta over the
+effect's contrast subjects; for the group's own subject j in the leave-one-out
+null, the mean over the others, so that no subject's own contrast scores it.
+It is fitted to a subject's residual r against the group with one amplitude
+a >= 0 (the effect's strength relative to the contrasts'), the group's scatter
+profiled as in `reference._Scorer.score` (the K deviations as a low-rank
+covariance, `scatter.profile_nuisance`), held out per test (a and the nuisance
+fitted on the other tests); and, with two levels, to the subject's level
+differences (`scatter._LevelDesign`) with its own amplitude.  The result has
+the fields of a model-based candidate's (`reference._Scorer.score`), so the
+evidence (held-out chi^2 gain plus level gain), the thresholds and the
+verdict are the same code and on the same scale.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .diagnose import DiagnosisError, candidate_names, load_lab_data
+from .group import ReferenceGroup, expand_reference_paths, level_pairs, wrap_log
+from .scatter import _LevelDesign
+
+#: Contrast subjects an effect needs: the leave-one-out null of a group
+#: subject that is one of them scores it with the others' mean.
+MIN_CONTRASTS = 2
+#: Name of the contrasts folder inside a reference folder (`find_contrasts`).
+CONTRASTS_FOLDER = "contrasts"
+
+
+@dataclass
+class Contrasts:
+    """{effect: (subject indices in the group, deltas (n, rows) complex)}
+    on the group's rows."""
+
+    by_effect: dict
+    source: str
+
+    @property
+    def effects(self) -> list[str]:
+        return list(self.by_effect)
+
+    def signature(self, effect: str, without: int | None = None) -> np.ndarray:
+        """Mean delta of `effect`'s contrast subjects (less subject
+        `without` of the group, when it is one of them)."""
+        subjects, deltas = self.by_effect[effect]
+        keep = [i for i, j in enumerate(subjects) if j != without]
+        return deltas[keep].mean(axis=0)
+
+    def describe(self) -> dict:
+        return {e: len(s) for e, (s, _) in self.by_effect.items()}
+
+
+def find_contrasts(reference) -> Path | None:
+    """The contrasts folder of a reference given as one folder (None when
+    it has none, or when the reference is a list of subject folders or a
+    loaded `ReferenceGroup`)."""
+    if isinstance(reference, ReferenceGroup):
+        return None
+    paths = [reference] if isinstance(reference, (str, Path)) else list(reference)
+    if len(paths) != 1:
+        return None
+    folder = Path(paths[0]) / CONTRASTS_FOLDER
+    return folder if folder.is_dir() else None
+
+
+def load_contrasts(folder, group: ReferenceGroup, channels: str = "plane") -> Contrasts:
+    """The contrast measurements in `folder` (see the module doc), each
+    paired with its subject in `group`; clear errors for an unknown effect
+    or subject, another protocol, or bad values."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise DiagnosisError(f"contrasts folder not found: {folder}")
+    names = {Path(s).name: j for j, s in enumerate(group.sources)}
+    by_effect = {}
+    for eff_dir in sorted(p for p in folder.iterdir() if p.is_dir()):
+        effect = eff_dir.name
+        candidate_names([effect])  # a clear error for an unknown effect
+        subjects, deltas = [], []
+        for sub in expand_reference_paths([eff_dir]):
+            name = sub.name if sub.is_dir() else sub.parent.name
+            if name not in names:
+                raise DiagnosisError(
+                    f"{sub}: contrast of a subject not in the reference group; name its folder "
+                    f"after one of the group's subjects ({', '.join(sorted(names))})")
+            j = names[name]
+            if j in subjects:
+                raise DiagnosisError(f"{eff_dir}: subject {name} is given twice")
+            lab = load_lab_data(sub, channels)
+            H = lab.rows.H[group.align(lab)]
+            if np.any(~np.isfinite(H)) or np.any(H == 0):
+                raise DiagnosisError(f"{lab.source}: zero or non-finite transmissibility in "
+                                     "the contrast data")
+            subjects.append(j)
+            deltas.append(wrap_log(np.log(H) - group.subject_log(j)))
+        if len(subjects) < MIN_CONTRASTS:
+            raise DiagnosisError(
+                f"{eff_dir}: {len(subjects)} contrast subject(s); an effect needs at least "
+                f"{MIN_CONTRASTS} (the leave-one-out null scores each of them with the others)")
+        by_effect[effect] = (subjects, np.array(deltas))
+    if not by_effect:
+        raise DiagnosisError(f"{folder}: no effect folders with contrast subjects in it")
+    return Contrasts(by_effect, str(folder))
+
+
+class ContrastScorer:
+    """Empirical signatures fitted to residuals against one group (see the
+    module doc).  The per-fold normal equations of the scatter are formed
+    once."""
+
+    def __init__(self, group: ReferenceGroup):
+        K = group.size
+        self.group = group
+        self.sw = 1.0 / np.sqrt(np.maximum(group.variance, 1e-12) * (1 + 1 / K))
+        self.A = group.deviations.T * math.sqrt((1 + 1 / K) / (K - 1)) * self.sw[:, None]
+        every = np.ones(len(self.sw), bool)
+        self.folds = [(every, every)] + [
+            (~m, m) for m in (group.rows.test_mask(t.direction, t.level) for t in group.tests)]
+        self._gram = [self._normal(self.A, train) for train, _ in self.folds]
+        self.pairs = level_pairs(group.rows)
+
+    @staticmethod
+    def _normal(A, train):
+        At = np.vstack([A[train].real, A[train].imag])
+        return At, At.T @ At + np.eye(At.shape[1])
+
+    @staticmethod
+    def _fit(At, G, y, c):
+        """min |y - At u - a c|^2 + |u|^2 over u and a >= 0 (c None: a = 0)."""
+        b = At.T @ y
+        u0 = np.linalg.solve(G, b)
+        if c is None:
+            return u0, 0.0
+        n = len(b)
+        M = np.empty((n + 1, n + 1))
+        M[:n, :n] = G
+        M[:n, n] = M[n, :n] = At.T @ c
+        M[n, n] = c @ c
+        z = np.linalg.solve(M, np.append(b, c @ y))
+        if z[n] <= 0.0:
+            return u0, 0.0
+        return z[:n], float(z[n])
+
+    def _chi(self, x, s):
+        """Per-row chi^2 on all rows and held out per test, and the
+        amplitude fitted on all rows."""
+        n = len(x)
+        chi_all = np.full(n, np.nan)
+        chi_held = np.full(n, np.nan)
+        a_all = 0.0
+        for k, ((train, where), (At, G)) in enumerate(zip(self.folds, self._gram, strict=True)):
+            y = np.concatenate([x[train].real, x[train].imag])
+            c = None if s is None else np.concatenate([s[train].real, s[train].imag])
+            u, a = self._fit(At, G, y, c)
+            e = x - self.A @ u - (a * s if s is not None else 0.0)
+            if k == 0:
+                chi_all = np.abs(e) ** 2
+                a_all, u_all = a, u
+            else:
+                chi_held[where] = np.abs(e[where]) ** 2
+        return chi_all, chi_held, a_all, float(u_all @ u_all)
+
+    def _level_gain(self, r, s) -> tuple[float, float]:
+        lo, hi = self.pairs
+        if not len(lo):
+            return 0.0, 0.0
+        L = _LevelDesign(r, self.group, lo, hi)
+        At = np.vstack([L.A.real, L.A.imag])
+        G = At.T @ At + np.eye(At.shape[1])
+        x = L.dr * L.sw
+        c = L.delta(s) * L.sw
+        y = np.concatenate([x.real, x.imag])
+        cc = np.concatenate([c.real, c.imag])
+        u, a = self._fit(At, G, y, cc)
+        return L.cost0 - float(np.sum((y - At @ u - a * cc) ** 2) + u @ u), a
+
+    def score(self, r: np.ndarray, effect: str, s: np.ndarray) -> dict:
+        """`effect`'s empirical signature `s` fitted to residual r: the
+        fields of `reference._Scorer.score`'s entries."""
+        x = r * self.sw
+        chi_all, chi_held, a, prior = self._chi(x, s * self.sw)
+        level, a_level = self._level_gain(r, s)
+        return {"chi_all": chi_all, "chi_heldout": chi_held, "coords": [a],
+                "cost": float(np.sum(chi_all) + prior), "signature": a * s,
+                "level_gain": level, "level_coords": [a_level], "level_gain_at_fit": 0.0,
+                "amplitude_driven": False,
+                "params": {effect: {"contrast_amplitude": a}},
+                "level_params": {effect: {"contrast_amplitude": a_level}}}
+
+    def baseline(self, r: np.ndarray) -> dict:
+        """No candidate (the "none" entry)."""
+        chi_all, chi_held, _, prior = self._chi(r * self.sw, None)
+        return {"chi_all": chi_all, "chi_heldout": chi_held, "coords": [],
+                "cost": float(np.sum(chi_all) + prior), "level_gain": 0.0}
+
+
+def contrast_evidence(res: dict, base: dict) -> float:
+    """Held-out chi^2 gain over no candidate plus the level gain (the
+    model-based candidates' `reference._evidence` for a level-dependent,
+    not amplitude-driven candidate)."""
+    return float(np.nansum(base["chi_heldout"]) - np.nansum(res["chi_heldout"])
+                 + res["level_gain"])
+
+
+def contrast_nulls(group: ReferenceGroup, contrasts: Contrasts) -> dict:
+    """{effect: [evidence of reference subject j against the other K - 1,
+    with the signature of the contrasts other than j's own]}."""
+    out = {e: [] for e in contrasts.effects}
+    for j in range(group.size):
+        sub = group.without(j)
+        r = wrap_log(group.subject_log(j) - sub.mean_log)
+        scorer = ContrastScorer(sub)
+        base = scorer.baseline(r)
+        for e in contrasts.effects:
+            res = scorer.score(r, e, contrasts.signature(e, without=j))
+            out[e].append(contrast_evidence(res, base))
+    return out
