@@ -49,9 +49,11 @@ def _trial_set(text: str | None):
     return out
 
 
-def _with_contrasts(report, data, group, contrasts, nulls, scorer) -> None:
+def _with_contrasts(report, data, group, contrasts, nulls, scorer, better=False) -> None:
     """Replace, in a stored report, the evidence and null gains of the
-    effects that have contrasts with their measured signatures'."""
+    effects that have contrasts with their measured signatures' (`better`:
+    the larger of the measured and the stored model-based evidence, the
+    null gains likewise, subject by subject)."""
     import numpy as np
 
     from ehm_drake.gap.contrasts import contrast_evidence
@@ -67,7 +69,13 @@ def _with_contrasts(report, data, group, contrasts, nulls, scorer) -> None:
     for e in report["ranking"]:
         if e["effect"] in contrasts.effects:
             res = scorer.score(r, e["effect"], contrasts.signature(e["effect"]))
-            e.update(evidence=contrast_evidence(res, base), null_gains=nulls[e["effect"]],
+            ev, null = contrast_evidence(res, base), nulls[e["effect"]]
+            if better and e["evidence"] > ev:
+                e["null_gains"] = [max(a, b) for a, b in zip(null, e["null_gains"], strict=True)]
+                continue
+            if better:
+                null = [max(a, b) for a, b in zip(null, e["null_gains"], strict=True)]
+            e.update(evidence=ev, null_gains=null,
                      heldout_gain=float(np.nansum(base["chi_heldout"])
                                         - np.nansum(res["chi_heldout"])),
                      level_gain=res["level_gain"], signature="contrasts",
@@ -89,6 +97,9 @@ def main(argv=None) -> int:
     p.add_argument("--contrasts", type=Path, default=None,
                    help="with --rethreshold: score the effects in this contrasts folder "
                         "(DIR/<effect>/<subject>/) with their measured signatures")
+    p.add_argument("--better", action="store_true",
+                   help="with --contrasts: each such effect's evidence is the larger of its "
+                        "measured and its modelled signature's (the null likewise)")
     p.add_argument("--reference", type=Path, nargs="+", default=None,
                    help="diagnose against these reference folders instead of the run's own "
                         "group (re-diagnoses)")
@@ -140,7 +151,8 @@ def main(argv=None) -> int:
         if args.rethreshold:
             stored = json.loads((rfile.parent / "diagnosis" / "report.json").read_text())
             if contrasts is not None:
-                _with_contrasts(stored, rfile.parent / "data", group, contrasts, nulls, scorer)
+                _with_contrasts(stored, rfile.parent / "data", group, contrasts, nulls, scorer,
+                                args.better)
             rep = rethreshold(stored)
         elif group is not None:
             data = load_lab_data(rfile.parent / "data")
