@@ -421,6 +421,21 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
         assert key["seed"] == ref["seed"] and key["session"] == 1
         assert key["effects"][eff]["strength"] > 0
     assert "measured again" in (out / "blind.md").read_text()
+    # A stored run judged again offline with its own contrasts
+    # (`bench/rescore_blind.py --rethreshold --contrasts`) gives each measured
+    # candidate the evidence and null the diagnosis gave it.
+    import io
+    from contextlib import redirect_stdout
+
+    scored = out / "rescored.json"
+    with redirect_stdout(io.StringIO()):
+        _bench("rescore_blind").main([str(out), "--rethreshold", "--contrasts",
+                                      str(out / "reference" / "contrasts"), "--out", str(scored)])
+    again = json.loads(scored.read_text())["trials"][0]["ranking"]
+    for e in rep["ranking"]:
+        a = next(x for x in again if x["effect"] == e["effect"])
+        assert a["evidence"] == pytest.approx(e["evidence"], rel=1e-6, abs=1e-6)
+        assert a["null_gains"] == pytest.approx(e["null_gains"], rel=1e-6, abs=1e-6)
     assert "Reference group" in (none / "diagnosis" / "report.md").read_text()
     # A group of 4 is below the recommended 16: the report says so.
     assert "4 subjects" in rep["reference"]["caution"]
