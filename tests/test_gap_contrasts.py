@@ -147,6 +147,9 @@ def test_an_opposite_change_gets_amplitude_zero_and_no_gain(lab):
     res = scorer.score(r, "cocontraction", s)
     assert res["coords"] == [0.0] and res["level_coords"] == [0.0]
     assert contrast_evidence(res, scorer.baseline(r)) == pytest.approx(0.0, abs=1e-9)
+    # A signature with nothing in it (no change measured) fits nothing.
+    flat = scorer.score(r, "cocontraction", np.zeros_like(s))
+    assert flat["coords"] == [0.0] and flat["level_gain"] == 0.0
 
 
 def test_a_leave_one_out_null_never_scores_a_subject_with_its_own_contrast(lab, monkeypatch):

@@ -153,7 +153,7 @@ class ContrastScorer:
         """min |y - At u - a c|^2 + |u|^2 over u and a >= 0 (c None: a = 0)."""
         b = At.T @ y
         u0 = np.linalg.solve(G, b)
-        if c is None:
+        if c is None or not c @ c > 0.0:  # (a signature with no rows here)
             return u0, 0.0
         n = len(b)
         M = np.empty((n + 1, n + 1))
