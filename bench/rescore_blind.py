@@ -60,6 +60,7 @@ def _with_contrasts(report, data, group, contrasts, nulls, scorer, better=False)
     from ehm_drake.gap.diagnose import load_lab_data
     from ehm_drake.gap.group import wrap_log
     from ehm_drake.gap.localize import cell_keys, gap_value
+    from ehm_drake.gap.reference import _gain
 
     keys = cell_keys(group.rows)
     lab = load_lab_data(data)
@@ -70,14 +71,12 @@ def _with_contrasts(report, data, group, contrasts, nulls, scorer, better=False)
         if e["effect"] in contrasts.effects:
             res = scorer.score(r, e["effect"], contrasts.signature(e["effect"]))
             ev, null = contrast_evidence(res, base), nulls[e["effect"]]
-            if better and e["evidence"] > ev:
-                e["null_gains"] = [max(a, b) for a, b in zip(null, e["null_gains"], strict=True)]
-                continue
             if better:
                 null = [max(a, b) for a, b in zip(null, e["null_gains"], strict=True)]
-            e.update(evidence=ev, null_gains=null,
-                     heldout_gain=float(np.nansum(base["chi_heldout"])
-                                        - np.nansum(res["chi_heldout"])),
+                if e["evidence"] > ev:  # the modelled signature's evidence stays
+                    e["null_gains"] = null
+                    continue
+            e.update(evidence=ev, null_gains=null, heldout_gain=_gain(res, base),
                      level_gain=res["level_gain"], signature="contrasts",
                      params=res["params"],
                      gap_reduction_heldout=float(1 - gap_value(res["chi_heldout"], keys) / g0)

@@ -195,8 +195,12 @@ class ContrastScorer:
         c = L.delta(s) * L.sw
         y = np.concatenate([x.real, x.imag])
         cc = np.concatenate([c.real, c.imag])
+
+        def cost(u, a):  # |x - A u - a c|^2 + |u|^2 (`_LevelDesign.cost` at a = 0)
+            return float(np.sum((y - At @ u - a * cc) ** 2) + u @ u)
         u, a = self._fit(At, G, y, cc)
-        return L.cost0 - float(np.sum((y - At @ u - a * cc) ** 2) + u @ u), a
+        # Both costs by the same arithmetic, so that a = 0 gains exactly 0.
+        return cost(self._fit(At, G, y, None)[0], 0.0) - cost(u, a), a
 
     def score(self, r: np.ndarray, effect: str, s: np.ndarray) -> dict:
         """`effect`'s empirical signature `s` fitted to residual r: the
