@@ -130,6 +130,11 @@ def test_the_measured_signature_names_the_effect_and_not_a_subject_without_it(la
             assert res["params"] == {"cocontraction": {"contrast_amplitude": res["coords"][0]}}
     nulls = contrast_nulls(group, c)
     assert len(nulls["cocontraction"]) == group.size
+    # Only the effects asked for (a diagnosis asks for its candidates).
+    assert contrast_nulls(group, c, ["cocontraction"]) == nulls
+    assert contrast_nulls(group, c, []) == {}
+    with pytest.raises(DiagnosisError, match="no contrasts for arms"):
+        contrast_nulls(group, c, ["arms"])
     assert evidence["with"] > 10 * max(max(nulls["cocontraction"]), evidence["without"], 1.0)
     for name, named in (("with", True), ("without", False)):
         thr, _, _ = thresholds(nulls, {"cocontraction": evidence[name]})

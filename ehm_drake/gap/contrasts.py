@@ -230,16 +230,21 @@ def contrast_evidence(res: dict, base: dict) -> float:
                  + res["level_gain"])
 
 
-def contrast_nulls(group: ReferenceGroup, contrasts: Contrasts) -> dict:
+def contrast_nulls(group: ReferenceGroup, contrasts: Contrasts, effects=None) -> dict:
     """{effect: [evidence of reference subject j against the other K - 1,
-    with the signature of the contrasts other than j's own]}."""
-    out = {e: [] for e in contrasts.effects}
+    with the signature of the contrasts other than j's own]}, for `effects`
+    (default every effect the contrasts hold)."""
+    effects = list(contrasts.effects if effects is None else effects)
+    unknown = [e for e in effects if e not in contrasts.effects]
+    if unknown:
+        raise DiagnosisError(f"{contrasts.source}: no contrasts for {', '.join(unknown)}")
+    out = {e: [] for e in effects}
     for j in range(group.size):
         sub = group.without(j)
         r = wrap_log(group.subject_log(j) - sub.mean_log)
         scorer = ContrastScorer(sub)
         base = scorer.baseline(r)
-        for e in contrasts.effects:
+        for e in effects:
             res = scorer.score(r, e, contrasts.signature(e, without=j))
             out[e].append(contrast_evidence(res, base))
     return out

@@ -449,7 +449,7 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
         fam_prog.total = total
         fam_prog.update(done, force=done % 10 == 0)
 
-    families = load_families(anchor["params"], measures, names, base_names, workers,
+    families = load_families(anchor["params"], measures, modelled, base_names, workers,
                              fam_progress, use_cache)
     slope = separation_slope(anchor["params"], measures)
     t_fam = time.perf_counter() - t0
@@ -471,7 +471,7 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
                       _init_worker, (state,)):
         results[r["name"]] = r
     if empirical:
-        nulls.update({n: v for n, v in contrast_nulls(group, contrasts).items() if n in names})
+        nulls.update(contrast_nulls(group, contrasts, empirical))
         scorer = ContrastScorer(group)
         for n in empirical:
             results[n] = scorer.score(residual, n, contrasts.signature(n))
