@@ -11,10 +11,13 @@ import pytest
 from ehm_drake.analysis.formats.frf import FrfData
 from ehm_drake.gap.calibration import thresholds
 from ehm_drake.gap.contrasts import (
+    LOW_AGREEMENT,
     MIN_CONTRASTS,
+    Contrasts,
     ContrastScorer,
     contrast_evidence,
     contrast_nulls,
+    contrast_quality,
     find_contrasts,
     load_contrasts,
 )
@@ -170,6 +173,46 @@ def test_a_leave_one_out_null_never_scores_a_subject_with_its_own_contrast(lab, 
     monkeypatch.setattr(c, "signature", spy)
     contrast_nulls(group, c)
     assert asked == list(range(group.size))
+
+
+
+def test_the_contrasts_quality_says_where_they_agree_and_when_they_do_not(lab, tmp_path):
+    """A lab reads off its contrasts where the imposed change acts and
+    whether its subjects agree on it, before diagnosing anyone."""
+    from ehm_drake.gap.report import _contrast_lines
+
+    root, logs = lab
+    group = load_reference([root / "ref"])
+    c = load_contrasts(find_contrasts(root / "ref"), group)
+    # Two more "contrasts" that share no change: each subject measured
+    # again with its own random change, as large as the effect's.
+    rng = np.random.default_rng(11)
+    subjects, deltas = c.by_effect["cocontraction"]
+    scale = np.sqrt(np.mean(np.abs(deltas) ** 2))
+    noise = scale * (rng.standard_normal((2, deltas.shape[1]))
+                     + 1j * rng.standard_normal((2, deltas.shape[1]))) / np.sqrt(2)
+    both = Contrasts({"cocontraction": (subjects, deltas), "arms": ([1, 2], noise),
+                      "double": (subjects, 2 * deltas)}, "here")
+    q = contrast_quality(group, both)
+    co = q["cocontraction"]
+    assert co["subjects"] == ["subject_00", "subject_03", "subject_07"]
+    # The subjects' changes are the same notch (strengths 0.8-1.2, noise
+    # 0.02): they agree, and the cells where they do are the fore-aft
+    # tests' around 2.5 Hz, where the notch is.
+    assert co["agreement"] > 0.8
+    assert co["cells"] and all(x["direction"] == "x" and x["f_lo_hz"] in (1.0, 2.5)
+                               for x in co["cells"])
+    assert sum(x["share"] for x in co["cells"]) > 0.5
+    # Twice the change is twice the size, and the same agreement.
+    assert q["double"]["rms_change_sd"] == pytest.approx(2 * co["rms_change_sd"], rel=1e-12)
+    assert q["double"]["agreement"] == pytest.approx(co["agreement"], rel=1e-12)
+    # Independent changes have nothing in common.
+    assert abs(q["arms"]["agreement"]) < LOW_AGREEMENT
+    text = "\n".join(_contrast_lines({"source": "here", "quality": q}))
+    assert "| cocontraction | subject_00, subject_03, subject_07 |" in text
+    assert "The contrasts of arms disagree" in text
+    assert "cocontraction disagree" not in text and "double disagree" not in text
+    assert _contrast_lines(None) == [] and _contrast_lines({"source": "x"}) == []
 
 
 def test_bad_contrasts_get_clear_errors(lab, tmp_path):

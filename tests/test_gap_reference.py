@@ -421,6 +421,15 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
         assert key["seed"] == ref["seed"] and key["session"] == 1
         assert key["effects"][eff]["strength"] > 0
     assert "measured again" in (out / "blind.md").read_text()
+    # The report says where each effect's contrasts act and how far they agree.
+    quality = rep["reference"]["contrasts"]["quality"]
+    assert sorted(quality) == ["cocontraction", "seat_foam_stiffening"]
+    for q in quality.values():
+        assert q["subjects"] == ["subject_00", "subject_01"]
+        assert -1.0 <= q["agreement"] <= 1.0 and q["rms_change_sd"] > 0
+        assert all(c["direction"] == "z" for c in q["cells"])
+    assert "| seat_foam_stiffening | subject_00, subject_01 |" in \
+        (none / "diagnosis" / "report.md").read_text()
     # A stored run judged again offline with its own contrasts
     # (`bench/rescore_blind.py --rethreshold --contrasts`) gives each measured
     # candidate the evidence and null the diagnosis gave it.

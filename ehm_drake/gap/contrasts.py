@@ -43,6 +43,7 @@ import numpy as np
 
 from .diagnose import DiagnosisError, candidate_names, load_lab_data
 from .group import ReferenceGroup, expand_reference_paths, level_pairs, wrap_log
+from .localize import BANDS, cell_keys
 from .scatter import _LevelDesign
 
 #: Contrast subjects an effect needs: the leave-one-out null of a group
@@ -50,6 +51,10 @@ from .scatter import _LevelDesign
 MIN_CONTRASTS = 2
 #: Name of the contrasts folder inside a reference folder (`find_contrasts`).
 CONTRASTS_FOLDER = "contrasts"
+#: Below this agreement (see `contrast_quality`) an effect's contrasts are
+#: said to disagree: their common change is weaker than what differs
+#: between them (the sittings' noise, or a condition imposed differently).
+LOW_AGREEMENT = 0.3
 
 
 @dataclass
@@ -247,4 +252,58 @@ def contrast_nulls(group: ReferenceGroup, contrasts: Contrasts, effects=None) ->
         for e in effects:
             res = scorer.score(r, e, contrasts.signature(e, without=j))
             out[e].append(contrast_evidence(res, base))
+    return out
+
+
+def contrast_quality(group: ReferenceGroup, contrasts: Contrasts, effects=None) -> dict:
+    """What a lab can read off its contrasts before any subject is
+    diagnosed, per effect (default every effect the contrasts hold), on the
+    rows whitened by the group's scatter (w = 1 / the smoothed variance):
+
+    - ``subjects``: the group's subjects measured with the effect;
+    - ``rms_change_sd``: the signature's (mean change's) RMS per row, in
+      units of the group's between-subject scatter there;
+    - ``agreement``: how far each contrast subject's change follows the
+      others' mean (whitened correlation, averaged over the subjects): 1 =
+      the same change in every subject, 0 = nothing in common, below
+      `LOW_AGREEMENT` the change is mostly what differs between the
+      sittings (noise) or between the subjects;
+    - ``cells``: where the change is common to the subjects (direction x
+      channel x band; the whitened products of every two subjects' changes,
+      summed over the cell), the three largest, each with its share of the
+      common change and the signature's RMS log-gain change there.
+    """
+    effects = list(contrasts.effects if effects is None else effects)
+    w = 1.0 / np.maximum(group.variance, 1e-12)
+    _, inv = np.unique(cell_keys(group.rows), return_inverse=True)
+    rows = group.rows
+    out = {}
+    for e in effects:
+        subjects, deltas = contrasts.by_effect[e]
+        n = len(subjects)
+        s = deltas.mean(axis=0)
+        agree = []
+        for i in range(n):
+            m = np.delete(deltas, i, axis=0).mean(axis=0)
+            den = math.sqrt(np.sum(w * np.abs(deltas[i]) ** 2) * np.sum(w * np.abs(m) ** 2))
+            agree.append(np.sum(w * (deltas[i] * np.conj(m)).real) / den if den > 0 else 0.0)
+        # The mean product of two subjects' changes: the common change's
+        # energy (the sittings' noise, independent, averages out).
+        common = (np.abs(deltas.sum(axis=0)) ** 2 - np.sum(np.abs(deltas) ** 2, axis=0)) \
+            / (n * (n - 1))
+        energy = np.bincount(inv, weights=w * common)
+        total = np.sum(np.maximum(energy, 0.0))
+        cells = []
+        for k in np.argsort(-energy)[:3]:
+            if energy[k] <= 0:
+                break
+            m = inv == k
+            i = int(np.flatnonzero(m)[0])
+            cells.append({"direction": str(rows.direction[i]), "segment": str(rows.segment[i]),
+                          "dof": str(rows.dof[i]), "f_lo_hz": BANDS[rows.band[i]][0],
+                          "f_hi_hz": BANDS[rows.band[i]][1], "share": float(energy[k] / total),
+                          "rms_log_gain_change": float(np.sqrt(np.mean(s.real[m] ** 2)))})
+        out[e] = {"subjects": [Path(group.sources[j]).name for j in subjects],
+                  "rms_change_sd": float(np.sqrt(np.mean(w * np.abs(s) ** 2))),
+                  "agreement": float(np.mean(agree)), "cells": cells}
     return out

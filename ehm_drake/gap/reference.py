@@ -78,7 +78,13 @@ from .calibration import (
     group_null_spread,
     thresholds,
 )
-from .contrasts import ContrastScorer, contrast_nulls, find_contrasts, load_contrasts
+from .contrasts import (
+    ContrastScorer,
+    contrast_nulls,
+    contrast_quality,
+    find_contrasts,
+    load_contrasts,
+)
 from .diagnose import (
     Diagnosis,
     DiagnosisError,
@@ -481,7 +487,8 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
                                       log_model, base_names)
     if contrasts is not None:
         report["reference"]["contrasts"] = {"source": contrasts.source,
-                                            "subjects": contrasts.describe()}
+                                            "subjects": contrasts.describe(),
+                                            "quality": contrast_quality(group, contrasts)}
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
                           "total": time.perf_counter() - t_start,
                           "workers": min(worker_count(workers), len(names) + 1)}

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .contrasts import LOW_AGREEMENT
 from .diagnose import Diagnosis
 from .localize import BANDS, band_label
 
@@ -154,6 +155,7 @@ def markdown(rep: dict, figures: list[str]) -> str:
                   f"{_num0(e.get('null_bound'))} | "
                   f"{e['null_threshold']:.0f} | {'yes' if e['beyond_null'] else 'no'} |"
                   for e in rep["ranking"]]
+        lines += _contrast_lines(ref.get("contrasts"))
         lines += ["", f"Model-form gap (the model refit to the group against the group mean): "
                   f"RMS log gain {mf['rms_log_gain_difference']:.2f}, phase "
                   f"{mf['rms_phase_difference_deg']:.0f} deg RMS, {mf['significant_cells']} "
@@ -333,3 +335,32 @@ def _worst_cells_figure(diag: Diagnosis, out: Path, n: int = 6) -> list[str]:
     fig.savefig(out / "worst_cells.png", dpi=110)
     plt.close(fig)
     return ["worst_cells.png"]
+
+
+def _contrast_lines(con: dict | None) -> list[str]:
+    """The contrasts' table (`contrasts.contrast_quality`), if any."""
+    if not con or not con.get("quality"):
+        return []
+    lines = ["", f"Contrasts ({con['source']}): the effects above marked `contrasts` are scored "
+             "with the change measured on these subjects of the group. Size: the mean change's "
+             "RMS per row in units of the group's scatter; agreement: how far each subject's "
+             "change follows the others' (1 = the same change); where: the cells where the "
+             "subjects' changes agree most.", "",
+             "| effect | subjects | size (group SD) | agreement | where (share, RMS log-gain "
+             "change) |", "|---|---|---|---|---|"]
+    weak = []
+    for e, q in con["quality"].items():
+        where = "; ".join(f"{c['direction']}: {c['segment']} {c['dof']} {c['f_lo_hz']:g}-"
+                          f"{c['f_hi_hz']:g} Hz ({_pct(c['share'])}, "
+                          f"{c['rms_log_gain_change']:.2f})" for c in q["cells"])
+        lines.append(f"| {e} | {', '.join(q['subjects'])} | {q['rms_change_sd']:.2f} | "
+                     f"{q['agreement']:.2f} | {where or '-'} |")
+        if q["agreement"] < LOW_AGREEMENT:
+            weak.append(e)
+    if weak:
+        lines += ["", f"The contrasts of {', '.join(weak)} disagree (agreement below "
+                  f"{LOW_AGREEMENT:g}): their common change is weaker than what differs between "
+                  "the sittings or the subjects. The diagnosis still fits it over all rows at "
+                  "once, but more contrast subjects, longer records or a more clearly imposed "
+                  "condition would sharpen its signature."]
+    return lines
