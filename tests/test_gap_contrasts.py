@@ -20,6 +20,7 @@ from ehm_drake.gap.contrasts import (
     contrast_quality,
     find_contrasts,
     load_contrasts,
+    smoothing_bins,
 )
 from ehm_drake.gap.diagnose import DiagnosisError, load_lab_data
 from ehm_drake.gap.group import load_reference, wrap_log
@@ -107,10 +108,41 @@ def test_contrasts_are_paired_with_their_own_subject(lab):
         mine = _effect(s, rows.direction, rows.freq, rows.level)
         assert np.sqrt(np.mean(np.abs(dl - mine) ** 2)) < 0.05
         assert np.sqrt(np.mean(np.abs(mine) ** 2)) > 0.05
-    # The leave-one-out signature is the mean of the others.
+    # The leave-one-out signature is the mean of the others (smoothed).
     np.testing.assert_allclose(c.signature("cocontraction", without=3),
-                               deltas[[0, 2]].mean(axis=0))
-    np.testing.assert_allclose(c.signature("cocontraction", without=5), deltas.mean(axis=0))
+                               c.smooth(deltas[[0, 2]].mean(axis=0)))
+    np.testing.assert_allclose(c.signature("cocontraction", without=5),
+                               c.smooth(deltas.mean(axis=0)))
+
+
+def test_a_signature_is_smoothed_over_frequency_within_each_test_and_channel(lab):
+    """The smoothing takes out the sittings' noise, not the effect: the
+    signature is nearer the subjects' true mean change than the raw mean,
+    and stays within its test and channel."""
+    root, _ = lab
+    group = load_reference([root / "ref"])
+    c = load_contrasts(find_contrasts(root / "ref"), group)
+    rows = group.rows
+    assert smoothing_bins(rows) == 3  # 0.9 Hz on this 0.3 Hz grid
+    assert smoothing_bins(rows, 0.0) == 1 and smoothing_bins(rows, 1.2) == 5
+    _, deltas = c.by_effect["cocontraction"]
+    true = _effect(1.0, rows.direction, rows.freq, rows.level)
+    raw, smoothed = deltas.mean(axis=0), c.signature("cocontraction")
+    # (the subjects' own 0.02 noise per sitting, less what the smoothing
+    # flattens at the notch's peak)
+    assert np.sqrt(np.mean(np.abs(smoothed - true) ** 2)) < \
+        0.8 * np.sqrt(np.mean(np.abs(raw - true) ** 2))
+    # A change on one channel of one test stays there.
+    spike = np.zeros(len(rows.freq), complex)
+    spike[len(spike) // 2] = 1.0
+    m = (rows.direction == rows.direction[len(spike) // 2]) & \
+        (rows.channel == rows.channel[len(spike) // 2]) & \
+        (rows.level == rows.level[len(spike) // 2])
+    out = c.smooth(spike)
+    assert np.all(out[~m] == 0) and 2 <= np.count_nonzero(out) <= 3
+    # Without the rows (a `Contrasts` made by hand) nothing is smoothed.
+    assert Contrasts(c.by_effect, "here").signature("cocontraction") == \
+        pytest.approx(raw)
 
 
 def test_the_measured_signature_names_the_effect_and_not_a_subject_without_it(lab):

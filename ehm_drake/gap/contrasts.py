@@ -20,8 +20,9 @@ the folder name of one of the reference group's subjects: the same subject
 measured with the effect.  At least `MIN_CONTRASTS` subjects per effect.
 
 Scoring (`ContrastScorer`): the signature s is the mean delta over the
-effect's contrast subjects; for the group's own subject j in the leave-one-out
-null, the mean over the others, so that no subject's own contrast scores it.
+effect's contrast subjects, smoothed over frequency (`SIGNATURE_SMOOTHING_HZ`);
+for the group's own subject j in the leave-one-out null, the mean over the
+others, so that no subject's own contrast scores it.
 It is fitted to a subject's residual r against the group with one amplitude
 a >= 0 (the effect's strength relative to the contrasts'), the group's scatter
 profiled as in `reference._Scorer.score` (the K deviations as a low-rank
@@ -42,8 +43,14 @@ from pathlib import Path
 import numpy as np
 
 from .diagnose import DiagnosisError, candidate_names, load_lab_data
-from .group import ReferenceGroup, expand_reference_paths, level_pairs, wrap_log
-from .localize import BANDS, cell_keys
+from .group import (
+    ReferenceGroup,
+    expand_reference_paths,
+    level_pairs,
+    smooth_over_frequency,
+    wrap_log,
+)
+from .localize import BANDS, Rows, cell_keys
 from .scatter import _LevelDesign
 
 #: Contrast subjects an effect needs: the leave-one-out null of a group
@@ -51,30 +58,60 @@ from .scatter import _LevelDesign
 MIN_CONTRASTS = 2
 #: Name of the contrasts folder inside a reference folder (`find_contrasts`).
 CONTRASTS_FOLDER = "contrasts"
+#: Width (Hz) of the running mean over frequency, within each test and
+#: channel, that a signature is smoothed with: a contrast's change per bin
+#: is mostly the noise of two sittings (short records: 4 Welch averages at
+#: 30 s), which an amplitude fitted to a subject's residual follows as much
+#: as the change itself; an effect changes a resonance at least as wide as
+#: ~1 Hz (the body's half-power bandwidths 2 zeta f: 1-3 Hz for the 4-6 Hz
+#: vertical mode, zeta 0.2-0.4).  On the stored groups' contrasts the
+#: subjects' agreement rises from 0.06-0.83 per bin to 0.30-0.95 at 0.9 Hz
+#: (stop 59; docs/gap_diagnosis_realities.md).  0: none.
+SIGNATURE_SMOOTHING_HZ = 0.9
 #: Below this agreement (see `contrast_quality`) an effect's contrasts are
 #: said to disagree: their common change is weaker than what differs
 #: between them (the sittings' noise, or a condition imposed differently).
 LOW_AGREEMENT = 0.3
 
 
+def smoothing_bins(rows: Rows, width_hz: float = SIGNATURE_SMOOTHING_HZ) -> int:
+    """Odd number of bins nearest `width_hz` on the rows' frequency grid
+    (1: no smoothing)."""
+    f = np.unique(np.round(rows.freq, 9))
+    if width_hz <= 0 or len(f) < 2:
+        return 1
+    n = int(round(width_hz / float(np.median(np.diff(f)))))
+    return max(1, n + 1 - n % 2)
+
+
 @dataclass
 class Contrasts:
     """{effect: (subject indices in the group, deltas (n, rows) complex)}
-    on the group's rows."""
+    on the group's rows (`rows`; with them the signatures are smoothed over
+    `SIGNATURE_SMOOTHING_HZ`)."""
 
     by_effect: dict
     source: str
+    rows: Rows | None = None
 
     @property
     def effects(self) -> list[str]:
         return list(self.by_effect)
 
+    def smooth(self, delta: np.ndarray) -> np.ndarray:
+        """`delta` (complex, per row) smoothed over frequency within each
+        test and channel (unchanged without rows)."""
+        if self.rows is None:
+            return delta
+        n = smoothing_bins(self.rows)
+        return delta if n == 1 else smooth_over_frequency(self.rows, delta, n)
+
     def signature(self, effect: str, without: int | None = None) -> np.ndarray:
         """Mean delta of `effect`'s contrast subjects (less subject
-        `without` of the group, when it is one of them)."""
+        `without` of the group, when it is one of them), smoothed."""
         subjects, deltas = self.by_effect[effect]
         keep = [i for i, j in enumerate(subjects) if j != without]
-        return deltas[keep].mean(axis=0)
+        return self.smooth(deltas[keep].mean(axis=0))
 
     def describe(self) -> dict:
         return {e: len(s) for e, (s, _) in self.by_effect.items()}
@@ -129,7 +166,7 @@ def load_contrasts(folder, group: ReferenceGroup, channels: str = "plane") -> Co
         by_effect[effect] = (subjects, np.array(deltas))
     if not by_effect:
         raise DiagnosisError(f"{folder}: no effect folders with contrast subjects in it")
-    return Contrasts(by_effect, str(folder))
+    return Contrasts(by_effect, str(folder), group.rows)
 
 
 class ContrastScorer:
@@ -258,7 +295,8 @@ def contrast_nulls(group: ReferenceGroup, contrasts: Contrasts, effects=None) ->
 def contrast_quality(group: ReferenceGroup, contrasts: Contrasts, effects=None) -> dict:
     """What a lab can read off its contrasts before any subject is
     diagnosed, per effect (default every effect the contrasts hold), on the
-    rows whitened by the group's scatter (w = 1 / the smoothed variance):
+    subjects' changes smoothed as the signature is (`Contrasts.smooth`) and
+    the rows whitened by the group's scatter (w = 1 / the smoothed variance):
 
     - ``subjects``: the group's subjects measured with the effect;
     - ``rms_change_sd``: the signature's (mean change's) RMS per row, in
@@ -279,7 +317,8 @@ def contrast_quality(group: ReferenceGroup, contrasts: Contrasts, effects=None) 
     rows = group.rows
     out = {}
     for e in effects:
-        subjects, deltas = contrasts.by_effect[e]
+        subjects, raw = contrasts.by_effect[e]
+        deltas = np.array([contrasts.smooth(d) for d in raw])
         n = len(subjects)
         s = deltas.mean(axis=0)
         agree = []
