@@ -245,6 +245,8 @@ def test_the_contrasts_quality_says_where_they_agree_and_when_they_do_not(lab, t
     assert "The contrasts of arms disagree" in text
     assert "cocontraction disagree" not in text and "double disagree" not in text
     assert _contrast_lines(None) == [] and _contrast_lines({"source": "x"}) == []
+    with pytest.raises(DiagnosisError, match="arms has 1 contrast subject"):
+        contrast_quality(group, Contrasts({"arms": ([1], noise[:1])}, "here"))
 
 
 def test_bad_contrasts_get_clear_errors(lab, tmp_path):

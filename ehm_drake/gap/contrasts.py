@@ -318,8 +318,11 @@ def contrast_quality(group: ReferenceGroup, contrasts: Contrasts, effects=None) 
     out = {}
     for e in effects:
         subjects, raw = contrasts.by_effect[e]
-        deltas = np.array([contrasts.smooth(d) for d in raw])
         n = len(subjects)
+        if n < MIN_CONTRASTS:
+            raise DiagnosisError(f"{contrasts.source}: {e} has {n} contrast subject(s); "
+                                 f"their agreement needs at least {MIN_CONTRASTS}")
+        deltas = np.array([contrasts.smooth(d) for d in raw])
         s = deltas.mean(axis=0)
         agree = []
         for i in range(n):
