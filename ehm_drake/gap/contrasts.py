@@ -65,7 +65,7 @@ CONTRASTS_FOLDER = "contrasts"
 #: as the change itself; an effect changes a resonance at least as wide as
 #: ~1 Hz (the body's half-power bandwidths 2 zeta f: 1-3 Hz for the 4-6 Hz
 #: vertical mode, zeta 0.2-0.4).  On the stored groups' contrasts the
-#: subjects' agreement rises from 0.06-0.83 per bin to 0.30-0.95 at 0.9 Hz
+#: subjects' agreement rises from 0.06-0.84 per bin to 0.25-0.96 at 0.9 Hz
 #: (stop 59; docs/gap_diagnosis_realities.md).  0: none.
 SIGNATURE_SMOOTHING_HZ = 0.9
 #: Below this agreement (see `contrast_quality`) an effect's contrasts are
