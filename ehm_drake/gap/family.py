@@ -349,14 +349,29 @@ class EffectGrid:
                                                              strict=True)]
             phi = stiffness_basis(vals)
             return tuple(np.tensordot(phi, M, 1) for M in mats)
+        # The spline along the last grid axis is over the stored matrices,
+        # the same at every call: made once (its construction was 12% of a
+        # diagnosis).  Along the other axes it is over values that depend on
+        # the coordinates, so those are made per call.
+        last = len(self.axes) - 1
+        splines = self.__dict__.get("_last_axis_splines")
+        if splines is None:
+            splines = [CubicSpline(self.axes[last], M, axis=last) for M in mats]
+            self.__dict__["_last_axis_splines"] = splines
         out = []
-        for M in mats:
-            V = M
-            for ax in reversed(range(len(self.axes))):
-                # Spline along the last grid axis, evaluate, drop the axis.
+        for spline in splines:
+            V = spline(coords[last])
+            for ax in reversed(range(last)):
+                # Spline along the last remaining axis, evaluate, drop the axis.
                 V = CubicSpline(self.axes[ax], V, axis=ax)(coords[ax])
             out.append(V)
         return tuple(out)
+
+    def __getstate__(self):
+        """Pickled without the splines (remade from the matrices)."""
+        state = dict(self.__dict__)
+        state.pop("_last_axis_splines", None)
+        return state
 
 
 @dataclass

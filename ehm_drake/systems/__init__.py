@@ -27,9 +27,27 @@ from collections import OrderedDict
 
 import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common import cpp_template as _cpp_template
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 SCALARS = (float, AutoDiffXd)
+
+
+def _module_of_frame(frame: int = 2):
+    """What pydrake's `cpp_template._get_module_from_stack` returns (the
+    module of the frame `frame` levels up), from the frame's globals instead
+    of `inspect.stack()`, which reads the source file of every frame on the
+    stack: each instantiation of a `TemplateSystem` (for float at import,
+    for AutoDiffXd at a linearization) makes two `TemplateMethod`s that ask
+    for it, 25-60 ms each, 0.7 s of importing the systems."""
+    f = sys._getframe(frame)
+    module = sys.modules.get(f.f_globals.get("__name__"))
+    return module if module is not None else _module_from_stack(frame + 1)
+
+
+_module_from_stack = getattr(_cpp_template, "_get_module_from_stack", None)
+if _module_from_stack is not None:
+    _cpp_template._get_module_from_stack = _module_of_frame
 
 
 def define_system(name: str, module: str):
