@@ -585,8 +585,19 @@ def fit_candidate(pred: Predictor, mask, theta0=None, rounds: int = 2,
         theta = np.clip(np.asarray(theta0, float), lo, hi)
     steps = np.concatenate([np.full(nb, 0.01), 0.005 * (hi[nb:] - lo[nb:])])
 
+    # least_squares evaluates the residuals at a point, then asks for the
+    # Jacobian there: the last evaluation is kept for it (one response
+    # evaluation in P + 2 fewer per iteration; the statistics, on which the
+    # residuals also depend, stay fixed within a least_squares call).
+    last = [None, None]
+
+    def fun(th):
+        r = residuals(pred, th, mask)
+        last[0], last[1] = th.tobytes(), r.copy()
+        return r
+
     def jac(th):
-        r0 = residuals(pred, th, mask)
+        r0 = last[1] if last[0] == th.tobytes() else residuals(pred, th, mask)
         J = np.empty((len(r0), len(th)))
         for k in range(len(th)):
             step = steps[k] if th[k] + steps[k] <= hi[k] else -steps[k]
@@ -597,7 +608,8 @@ def fit_candidate(pred: Predictor, mask, theta0=None, rounds: int = 2,
 
     for _ in range(rounds):
         pred.update_statistics(theta)
-        res = least_squares(lambda th: residuals(pred, th, mask), theta, jac=jac,
+        last[0] = None  # the statistics changed
+        res = least_squares(fun, theta, jac=jac,
                             bounds=(lo, hi), method="trf", x_scale="jac", ftol=1e-4,
                             xtol=1e-4, max_nfev=max_iterations)
         nfev += res.nfev * (len(theta) + 1)
