@@ -37,6 +37,7 @@ class Progress:
         self.start, self.unit = start, unit
         self._stream = stream
         self.t0 = time.perf_counter()
+        self._rate_t0 = self.t0  # the rate counts the work since then
         self.done = start
         self._last_draw = -1.0
         self._open = False  # a bar line is on screen without its newline
@@ -57,7 +58,7 @@ class Progress:
         ran = self.done - self.start
         if self.total is None or ran <= 0:
             return None
-        return self.elapsed / ran * max(self.total - self.done, 0.0)
+        return (time.perf_counter() - self._rate_t0) / ran * max(self.total - self.done, 0.0)
 
     def _tty(self) -> bool:
         try:
@@ -115,6 +116,14 @@ class Progress:
         as done, but not in the rate the time left is estimated from."""
         self.start += by
         self.done += by
+
+    def setup_done(self) -> None:
+        """The units done so far carried one-off work (a reference group's
+        calibration in a blind run's first trial): the time left is
+        estimated from the units after them.  Until one more unit is done
+        no estimate is shown."""
+        self.start = self.done
+        self._rate_t0 = time.perf_counter()
 
     def say(self, text: str) -> None:
         """A message on its own line (the bar, if any, is kept above it)."""

@@ -207,9 +207,26 @@ def test_progress_eta_counts_only_this_calls_work():
         p.skip()  # reused from an earlier run: no time
     assert p.eta() is None  # nothing ran yet: no rate
     p.t0 -= 10.0  # 10 s for the one trial run now
+    p._rate_t0 -= 10.0
     p.step()
     assert p.done == 7
     assert p.eta() == pytest.approx(30.0, rel=0.01)  # 3 left at 10 s each
+
+
+def test_progress_leaves_one_off_setup_out_of_the_rate():
+    """A blind run's first trial against a reference group also calibrates
+    the group (tens of minutes; then a few per trial): after `setup_done`
+    the time left comes from the units after it."""
+    p = Progress("blind", 30, enabled=False)
+    p.t0 -= 1800.0
+    p._rate_t0 -= 1800.0
+    p.step()  # the first trial, with the calibration
+    assert p.eta() == pytest.approx(29 * 1800.0, rel=0.01)
+    p.setup_done()
+    assert p.eta() is None and p.elapsed > 1800.0  # the elapsed time is kept
+    p._rate_t0 -= 120.0
+    p.step()
+    assert p.eta() == pytest.approx(28 * 120.0, rel=0.01)
 
 
 def test_progress_on_a_terminal_redraws_in_place_and_keeps_messages_apart():
