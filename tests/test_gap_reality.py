@@ -1,14 +1,16 @@
-"""The gap diagnosis on data from an independent reality (`lumped`): a short
-blind run.  On a body that is not the model the base refit leaves a
-model-form gap everywhere; the diagnosis must say so and where it lies, and
-name no effect that is not there (the issue's false-alarm assertion).
+"""The gap diagnosis on data from an independent reality (`lumped`), without
+a reference group: a short blind run of one no-effect subject.  On a body
+that is not the model the base refit leaves a model-form gap everywhere;
+the diagnosis must say so and where it lies, and name no effect that is not
+there (the issue's false-alarm assertion).
 
 Vertical tests at two levels, 30 s records, three candidates (as the
-own-family short run in test_gap_blind.py).  Seed 21 draws a no-effect trial
-first, then seat_foam_stiffening.  The top-1/top-3 figures on realities are
-not asserted: the README reports them ("Independent realities"; every run in
-docs/gap_diagnosis_realities.md); on today's method the hidden effect is not
-found beyond the model-form gap.
+own-family short run in test_gap_blind.py); seed 21 draws a no-effect trial
+first.  Without a reference group a hidden effect is not found beyond the
+model-form gap (README, "Independent realities"): the issue's assertions
+with an effect (top-1, top-3, the twin check) run on the short blind run
+against a reference group, `tests/test_gap_reference.py`, which draws the
+same no-effect subject first.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import pytest
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("gap_reality")]
 
 CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "cocontraction")
-SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
+SHORT_BLIND = dict(trials=1, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
                    hidden=("seat_foam_stiffening",), candidates=CANDIDATES,
                    p_none=0.34, p_two=0.0, reality="lumped")
 
@@ -38,7 +40,7 @@ def test_no_effect_named_on_a_reality_and_the_structural_gap_located(reality_bli
     from ehm_drake.gap.blind import ACCEPTANCE
 
     out, s = reality_blind
-    assert s["trials"] == 2 and s["no_effect_trials"] == 1
+    assert s["trials"] == 1 and s["no_effect_trials"] == 1
     assert s["false_alarm"] <= ACCEPTANCE["false_alarm"]
     none = next(t for t in sorted(out.glob("trial_*"))
                 if json.loads((t / "result.json").read_text())["hidden"] == {})
@@ -54,22 +56,4 @@ def test_no_effect_named_on_a_reality_and_the_structural_gap_located(reality_bli
     assert all(e["reduction_beyond"] < 0.15 for e in sp["ranking"])
     md = (none / "diagnosis" / "report.md").read_text()
     assert "Model-form gap" in md and "structural" in md
-
-
-def test_the_effect_trial_is_scored_against_its_twin(reality_blind):
-    out, s = reality_blind
-    trial = next(t for t in sorted(out.glob("trial_*"))
-                 if json.loads((t / "result.json").read_text())["hidden"])
-    res = json.loads((trial / "result.json").read_text())
-    det = res["detectability"]["effects"]["all"]
-    # The twin (same subject, seed and noise, no effect) is made after the
-    # diagnosis; the effect moves cells beyond the noise, and fewer remain
-    # once the smooth discrepancy has taken what it can.
-    assert det["cells_raw"] >= det["cells"] >= 0
-    assert res["score"]["detectable"] == (det["cells"] > 0)
-    rep = json.loads((trial / "diagnosis" / "report.json").read_text())
-    assert rep["verdict"] in ("structural", "explained", "ambiguous", "unexplained")
-    # Whatever it concludes, a named effect comes with its own share of the gap.
-    if rep["structural"]["ran"] and rep["best_effect"]:
-        assert "own share of the gap" in rep["explanation"]
     assert "Confusion matrix" in (out / "blind.md").read_text()

@@ -365,9 +365,16 @@ def test_blind_run_records_a_diverging_reality_trial_and_goes_on(tmp_path, monke
 # A short blind run on a reality, against a reference group
 # ---------------------------------------------------------------------------
 
-CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "cocontraction")
-SHORT_BLIND = dict(trials=1, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
-                   hidden=("seat_foam_stiffening",), candidates=CANDIDATES,  # seed 21: none
+#: Seed 21 draws a no-effect trial, then the hidden effect at 0.98.  The effect
+#: is a loose seat cushion: under vertical tests alone and against a group of 4
+#: it stands out of the group (evidence 3.9 times its threshold, the
+#: family-wise score 55 against the group's 14 at stop 61), where a seat foam
+#: at 0.98 does not (one group subject's own foam gain, 623, sets its
+#: threshold at 3,309 against the trial's 629) and the arms leave no
+#: significant cell: a group of 4 is a quarter of the recommended 16.
+CANDIDATES = ("visceral_mass", "seat_foam_stiffening", "seat_cushion_dynamics")
+SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duration_s=30.0,
+                   hidden=("seat_cushion_dynamics",), candidates=CANDIDATES,
                    p_none=0.34, p_two=0.0, reality="lumped", references=4, contrasts=2)
 
 
@@ -383,13 +390,34 @@ def reference_blind(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.xdist_group("gap_reference")
 def test_reference_group_blind_run_on_a_reality(reference_blind):
-    from ehm_drake.gap.blind import ACCEPTANCE
+    from ehm_drake.gap.blind import ACCEPTANCE, acceptance_for
 
     out, s = reference_blind
     subjects = sorted((out / "reference").glob("subject_*/frf.csv"))
     assert len(subjects) == 4
-    assert s["trials"] == 1 and s["no_effect_trials"] == 1
-    assert s["false_alarm"] <= ACCEPTANCE["false_alarm"]
+    assert s["trials"] == 2 and s["no_effect_trials"] == 1
+    # The assertions on a reality (its bar: top-1 >= 75%, top-3 >=
+    # 90%, false alarms <= 10%; all met but the 30 trials of a full run):
+    # the effect is named, nothing is named on the no-effect subject.
+    bar = acceptance_for("lumped")
+    assert s["detectable_trials"] == 1, s["confusion"]
+    assert s["top1"] >= bar["top1"] and s["top3"] >= bar["top3"], s["confusion"]
+    assert s["false_alarm"] <= bar["false_alarm"] == ACCEPTANCE["false_alarm"]
+    assert {k for k, ok in s["acceptance"].items() if not ok} == {"trials"}
+    assert "reference group of 4" in (out / "blind.md").read_text()
+    effect = next(t for t in sorted(out.glob("trial_*"))
+                  if json.loads((t / "result.json").read_text())["hidden"])
+    res = json.loads((effect / "result.json").read_text())
+    rep = json.loads((effect / "diagnosis" / "report.json").read_text())
+    assert (rep["verdict"], rep["best_effect"]) == ("explained", "seat_cushion_dynamics")
+    named = next(e for e in rep["ranking"] if e["effect"] == "seat_cushion_dynamics")
+    assert named["signature"] == "contrasts" and named["evidence"] > named["null_threshold"]
+    assert "removes" in rep["explanation"] and "held-out gap" in rep["explanation"]
+    # Detectable by its twin (same subject, seed and noise, no effect), made
+    # after the diagnosis: the effect moves cells beyond the noise, and
+    # fewer remain once the smooth discrepancy has taken what it can.
+    det = res["detectability"]["effects"]["all"]
+    assert det["cells_raw"] >= det["cells"] > 0 and res["score"]["detectable"]
     none = next(t for t in sorted(out.glob("trial_*"))
                 if json.loads((t / "result.json").read_text())["hidden"] == {})
     rep = json.loads((none / "diagnosis" / "report.json").read_text())
@@ -408,12 +436,12 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
     # The two imposable candidates were measured on 2 group subjects each (in
     # a second sitting) and are scored with those signatures; the visceral
     # mass, which no protocol imposes, with the model's.
-    assert rep["reference"]["contrasts"]["subjects"] == {"cocontraction": 2,
+    assert rep["reference"]["contrasts"]["subjects"] == {"seat_cushion_dynamics": 2,
                                                          "seat_foam_stiffening": 2}
     assert {e["effect"]: e["signature"] for e in rep["ranking"]} == {
-        "cocontraction": "contrasts", "seat_foam_stiffening": "contrasts",
+        "seat_cushion_dynamics": "contrasts", "seat_foam_stiffening": "contrasts",
         "visceral_mass": "model"}
-    for eff in ("cocontraction", "seat_foam_stiffening"):
+    for eff in ("seat_cushion_dynamics", "seat_foam_stiffening"):
         made = sorted(p.name for p in (out / "reference" / "contrasts" / eff).iterdir())
         assert made == ["subject_00", "subject_01"]
         key = json.loads((out / "keys" / f"contrast_{eff}_subject_00.json").read_text())
@@ -423,7 +451,7 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
     assert "measured again" in (out / "blind.md").read_text()
     # The report says where each effect's contrasts act and how far they agree.
     quality = rep["reference"]["contrasts"]["quality"]
-    assert sorted(quality) == ["cocontraction", "seat_foam_stiffening"]
+    assert sorted(quality) == ["seat_cushion_dynamics", "seat_foam_stiffening"]
     for q in quality.values():
         assert q["subjects"] == ["subject_00", "subject_01"]
         assert -1.0 <= q["agreement"] <= 1.0 and q["rms_change_sd"] > 0
