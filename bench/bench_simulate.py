@@ -2,7 +2,7 @@
 RMS per axis, random 0.1-12 Hz), outputs logged at 200 Hz, one core.
 
     python bench/bench_simulate.py [--duration 60] [--time-step 0.001]
-        [--design reference|implicit]
+        [--design reference|implicit] [--output-rate 200]
 
 Prints the settle time (static equilibrium + 5 s settling), the real-time
 factor of the vibration run (simulated seconds per wall second) and two
@@ -29,7 +29,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from ehm_drake.diagram import build_diagram
 from ehm_drake.model.plant import add_seated_human
-from ehm_drake.params import load_params
+from ehm_drake.params import ParameterError, load_params, validate
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import StateMap, set_normal_reference, settle, vibrate
 
@@ -135,6 +135,9 @@ def main() -> None:
     ap.add_argument("--time-step", type=float, default=None)
     ap.add_argument("--design", choices=("reference", "implicit"), default=None,
                     help="simulation.design (default: the parameter file's)")
+    ap.add_argument("--output-rate", type=float, default=None,
+                    help="simulation.output_rate_hz (default: the parameter file's; its "
+                         "period must be a whole number of steps, e.g. 166.667 at 6 ms)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
@@ -143,6 +146,12 @@ def main() -> None:
         params.simulation.time_step_s = args.time_step
     if args.design:
         params.simulation.design = args.design
+    if args.output_rate:
+        params.simulation.output_rate_hz = args.output_rate
+    try:  # the checks `ehm-drake simulate` makes (a whole number of steps per output)
+        validate(params)
+    except ParameterError as e:
+        raise SystemExit(f"bench_simulate: {e}") from None
     s = params.simulation
     t0 = time.perf_counter()
     settled = settle(params)
