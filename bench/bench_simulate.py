@@ -2,7 +2,7 @@
 RMS per axis, random 0.1-12 Hz), outputs logged at 200 Hz, one core.
 
     python bench/bench_simulate.py [--duration 60] [--time-step 0.001]
-        [--design reference|implicit] [--output-rate 200]
+        [--design reference|implicit] [--output-every K]
 
 Prints the settle time (static equilibrium + 5 s settling), the real-time
 factor of the vibration run (simulated seconds per wall second) and two
@@ -135,9 +135,10 @@ def main() -> None:
     ap.add_argument("--time-step", type=float, default=None)
     ap.add_argument("--design", choices=("reference", "implicit"), default=None,
                     help="simulation.design (default: the parameter file's)")
-    ap.add_argument("--output-rate", type=float, default=None,
-                    help="simulation.output_rate_hz (default: the parameter file's; its "
-                         "period must be a whole number of steps, e.g. 166.667 at 6 ms)")
+    ap.add_argument("--output-every", type=int, default=None, metavar="K",
+                    help="outputs every K steps (simulation.output_rate_hz = 1 / (K h), "
+                         "exactly; default: the parameter file's rate, whose period must be a "
+                         "whole number of steps: 200 Hz at 5 ms, not at 6 ms)")
     args = ap.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
@@ -146,8 +147,11 @@ def main() -> None:
         params.simulation.time_step_s = args.time_step
     if args.design:
         params.simulation.design = args.design
-    if args.output_rate:
-        params.simulation.output_rate_hz = args.output_rate
+    if args.output_every is not None:
+        if args.output_every < 1:
+            raise SystemExit("bench_simulate: --output-every must be a whole number >= 1")
+        params.simulation.output_rate_hz = 1.0 / (args.output_every
+                                                  * params.simulation.time_step_s)
     try:  # the checks `ehm-drake simulate` makes (a whole number of steps per output)
         validate(params)
     except ParameterError as e:
