@@ -84,7 +84,8 @@ def _load_model_params(args):
     design, step = getattr(args, "design", None), getattr(args, "time_step", None)
     by_accuracy = (design == "implicit" and params.simulation.design != "implicit"
                    and step is None)
-    params = on_design(params, design, step, _measures(args), args.variant)
+    params = on_design(params, design, step, _measures(args), args.variant,
+                       getattr(args, "output_every", None))
     if by_accuracy and not getattr(args, "quiet", False) and \
             params.simulation.time_step_s < IMPLICIT_TIME_STEP_S:
         print(f"implicit design: time step {params.simulation.time_step_s * 1e3:.3g} "
@@ -424,6 +425,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--settled", metavar="FILE", help="restart from a saved settled state "
                    "(settled_state.npz of an earlier run with the same model)")
     _add_model_arguments(p)
+    p.add_argument("--output-every", type=int_at_least(1, "--output-every"), metavar="K",
+                   help="record the outputs every K time steps, at 1 / (K step) exactly "
+                   "(default: the parameters' rate, 200 Hz, whose period must be a whole "
+                   "number of steps; e.g. --design implicit --time-step 0.006 --output-every "
+                   "1: 166.7 Hz, about 15%% faster than 5 ms; README \"Two designs\")")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")

@@ -58,7 +58,14 @@ from .model.plant import (
     pid_vectors,
     step_damping_limits,
 )
-from .params import IMPLICIT_TIME_STEP_S, ModelParams, apply_variant, validate, with_design
+from .params import (
+    IMPLICIT_TIME_STEP_S,
+    ModelParams,
+    ParameterError,
+    apply_variant,
+    validate,
+    with_design,
+)
 from .signals import SeatSignal
 from .systems.excitation import add_seat_excitation
 from .systems.forces import ForceLaws
@@ -358,11 +365,28 @@ def accurate_step(params: ModelParams, measures: BodyMeasures = REFERENCE,
 
 
 def on_design(params: ModelParams, design: str | None = None, time_step_s: float | None = None,
-              measures: BodyMeasures = REFERENCE, variant: str = "default") -> ModelParams:
+              measures: BodyMeasures = REFERENCE, variant: str = "default",
+              output_every: int | None = None) -> ModelParams:
     """`params` on `design` at `time_step_s` (the command line's ``--design``
     and ``--time-step``; None keeps the parameters').  Switching to the
     implicit design without a step gives the step chosen by accuracy for
-    this body and variant (`accurate_step`); otherwise `params.with_design`."""
+    this body and variant (`accurate_step`); otherwise `params.with_design`.
+
+    `output_every` (``--output-every``): the outputs every that many steps
+    of the resulting step h, at exactly 1 / (output_every h), in place of
+    the parameters' rate (whose period must be a whole number of steps: a
+    6 ms step cannot have 200 Hz outputs, and 1/0.006 Hz cannot be typed)."""
+    if output_every is not None:
+        if isinstance(output_every, bool) or int(output_every) != output_every \
+                or output_every < 1:
+            raise ParameterError(f"output every {output_every!r} steps: must be a whole "
+                                 "number >= 1")
+        if time_step_s is None:
+            time_step_s = on_design(params, design, None, measures,
+                                    variant).simulation.time_step_s
+        params = params.copy()
+        params.simulation.output_rate_hz = 1.0 / (int(output_every) * time_step_s)
+        return with_design(params, design, time_step_s)
     if design is None and time_step_s is None:
         return params
     switched = design is not None and design != params.simulation.design
