@@ -27,7 +27,7 @@ from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from ehm_drake.diagram import build_diagram
+from ehm_drake.diagram import build_diagram, on_design
 from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import ParameterError, load_params, validate
 from ehm_drake.signals import make_seat_signal
@@ -147,13 +147,9 @@ def main() -> None:
         params.simulation.time_step_s = args.time_step
     if args.design:
         params.simulation.design = args.design
-    if args.output_every is not None:
-        if args.output_every < 1:
-            raise SystemExit("bench_simulate: --output-every must be a whole number >= 1")
-        params.simulation.output_rate_hz = 1.0 / (args.output_every
-                                                  * params.simulation.time_step_s)
     try:  # the checks `ehm-drake simulate` makes (a whole number of steps per output)
-        validate(params)
+        params = (validate(params) if args.output_every is None
+                  else on_design(params, output_every=args.output_every))
     except ParameterError as e:
         raise SystemExit(f"bench_simulate: {e}") from None
     s = params.simulation
