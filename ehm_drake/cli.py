@@ -11,6 +11,7 @@ comfort           ISO 2631-1 comfort metrics of a simulation or lab folder
 diagnose          sim-to-real gap: where it lies, which unmodelled effect, how much it shrinks
 synth             lab-like data from the model with hidden effects (truth to a key file)
 blind             blind check of diagnose on synthetic trials
+validate          the model against published facts (and a lab's datasets)
 
 Errors in the input (parameter files, arguments, data) end the program with
 a one-line message and exit status 2; a simulation that blows up, with
@@ -40,6 +41,7 @@ from .model.anthropometry import REFERENCE, BodyMeasures
 from .params import IMPLICIT_TIME_STEP_S, VARIANTS, ParameterError, load_params
 from .signals import KINDS, PAPER_RMS, SignalError
 from .sweep import add_sweep_arguments
+from .validation.command import add_validate_arguments
 from .viz import add_viz_arguments, handle_viz
 
 
@@ -64,7 +66,8 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variant", choices=VARIANTS, default="default",
                    help="model variant of the paper (default: %(default)s)")
     p.add_argument("--params", metavar="FILE", help="parameter file (YAML/JSON), merged over "
-                   "the defaults; a fit's output is accepted")
+                   "the defaults; a fit's output is accepted; or a packaged configuration: "
+                   "car_seat (default), rigid_seat, rigid_seat_backrest, paper_linear")
     p.add_argument("--mass", type=positive_float("--mass"), metavar="KG", help="body mass (kg)")
     p.add_argument("--stature", type=positive_float("--stature"), metavar="M",
                    help="stature (m)")
@@ -482,6 +485,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_sweep_arguments(sub)
     add_gap_arguments(sub)
+    add_validate_arguments(sub)
     return parser
 
 

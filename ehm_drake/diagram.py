@@ -58,6 +58,8 @@ from .model.plant import (
     pid_vectors,
     step_damping_limits,
 )
+from .model.seats import apply_seat
+from .model.softening import element_set, long_range_contacts
 from .params import (
     IMPLICIT_TIME_STEP_S,
     ModelParams,
@@ -86,6 +88,7 @@ from .systems.seat import (
     restraint_parameters,
     restraint_points,
 )
+from .systems.softening import BodySoftening
 
 SEAT_FORCE_NAMES = tuple(f"{p}_f{a}" for p in SEAT_PART_NAMES for a in "xyz")
 
@@ -220,11 +223,15 @@ def build_diagram(
         diagnosis' delayed-feedback linearization; the extensions'
         feedback transforms are then left out).
     """
-    params = apply_variant(params, variant)
+    at_rest = apply_seat(apply_variant(params, variant))
+    # The plant's contacts carry the body with the tissue's long-range
+    # stiffness; the short-range part is the softening system's
+    # (`ehm_drake.model.softening`).
+    params = long_range_contacts(at_rest)
     effects = validate_extensions(effects)
     h = params.simulation.time_step_s
     builder = DiagramBuilder()
-    hp = add_seated_human(builder, params, measures, effects)
+    hp = add_seated_human(builder, params, measures, effects, rest_params=at_rest)
     extensions = hp.extensions
     plant = hp.plant
     layout = hp.layout
@@ -259,6 +266,11 @@ def build_diagram(
                  "restraint_seat_forces": laws.GetOutputPort("restraint_seat_forces"),
                  "restraint_normal_displacement": laws.GetOutputPort("normal_displacement"),
                  "restraint_deflection": laws.GetOutputPort("deflection")}
+    # The body's softening with its own movement (`model.softening`).
+    softening = _body_softening(hp, at_rest, h)
+    if softening is not None:
+        forces.append(builder.AddNamedSystem("body_softening", softening))
+        sys["body_softening"] = forces[-1]
     # The extensions' force systems (their "state" input is connected below).
     for ext in extensions:
         forces += ext.add_force_systems(parts)
@@ -277,6 +289,7 @@ def build_diagram(
     else:
         for ext in extensions:
             feedback = ext.transform_feedback(parts, feedback)
+    forces_on_body = list(forces)
     for i, s in enumerate(forces):
         builder.Connect(state, s.GetInputPort("state"))
         if s.HasInputPort("controller_state"):
@@ -293,8 +306,17 @@ def build_diagram(
         forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
         builder.Connect(plant.get_contact_results_output_port(),
                         forces.GetInputPort("contact_results"))
-        builder.Connect(law_ports["restraint_seat_forces"],
-                        forces.GetInputPort("restraint_forces"))
+        restraint_forces = law_ports["restraint_seat_forces"]
+        # The tissue's softening acts between body and seat.
+        soft = [p for s in forces_on_body if (p := _seat_force_port(s)) is not None]
+        if soft:
+            total = builder.AddNamedSystem("seat_force_sum",
+                                           Adder(1 + len(soft), restraint_forces.size()))
+            builder.Connect(restraint_forces, total.get_input_port(0))
+            for i, port in enumerate(soft, 1):
+                builder.Connect(port, total.get_input_port(i))
+            restraint_forces = total.get_output_port()
+        builder.Connect(restraint_forces, forces.GetInputPort("restraint_forces"))
         sys["seat_forces"] = forces
     if guard:
         g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(hp))
@@ -313,6 +335,8 @@ def build_diagram(
     }
     if seat_forces:
         outputs["seat_forces"] = sys["seat_forces"].GetOutputPort("seat_forces")
+    if "body_softening" in sys:
+        outputs["softening_deformation"] = sys["body_softening"].GetOutputPort("deformation")
     for name, port in outputs.items():
         builder.ExportOutput(port, name)
     loggers = {}
@@ -355,8 +379,12 @@ def accurate_step(params: ModelParams, measures: BodyMeasures = REFERENCE,
     p_variant = apply_variant(validate(p), variant)
     with warnings.catch_warnings():  # (the 5 ms step's own warning: the step is chosen here)
         warnings.simplefilter("ignore", UserWarning)
-        hp = add_seated_human(DiagramBuilder(), p_variant, measures, validate_extensions(effects))
-    limit = min(step_damping_limits(hp.plant, hp.human, p_variant, hp.body).values(),
+        # The plant as `build_diagram` makes it (contacts at their long-range
+        # stiffness, `model.softening`).
+        p_plant = long_range_contacts(apply_seat(p_variant))
+        hp = add_seated_human(DiagramBuilder(), p_plant, measures, validate_extensions(effects),
+                              rest_params=apply_seat(p_variant))
+    limit = min(step_damping_limits(hp.plant, hp.human, p_plant, hp.body).values(),
                 default=IMPLICIT_TIME_STEP_S)
     period = 1.0 / p.simulation.output_rate_hz
     n = max(1, math.ceil(period / min(limit, IMPLICIT_TIME_STEP_S) - 1e-9))
@@ -461,6 +489,28 @@ def _force_laws(hp: HumanPlant, params: ModelParams, h: float, feedback_input: b
                     hp.restraint_constraints,
                     contact_explicit_damping(params, points, hp.moving_seat_parts)),
         inertial_instances=[hp.human, hp.seat], period=h, feedback_input=feedback_input)
+
+
+def _seat_force_port(system):
+    """A softening system's force on the body per seat part (None for the
+    other force systems)."""
+    if hasattr(system, "rest_deformation"):
+        return system.GetOutputPort("seat_forces")
+    return None
+
+
+def _body_softening(hp: HumanPlant, params: ModelParams, h: float):
+    """The `BodySoftening` system of the enabled softening elements (None
+    when `params.softening` enables none); `params` with the contacts'
+    stiffness at rest."""
+    points = restraint_points(hp)
+    elements = element_set(params, points, hp.layout)
+    if not elements.n:
+        return None
+    tissue = [p for p in points if p.name in elements.names[:elements.kinds.count("tissue")]]
+    muscle = [hp.layout.names.index(n) for k, n in zip(elements.kinds, elements.names,
+                                                       strict=True) if k == "muscle"]
+    return BodySoftening(hp.plant, hp.layout, elements, tissue, muscle, h)
 
 
 def _transforms_feedback(extensions: tuple[ModelExtension, ...]) -> bool:

@@ -24,13 +24,22 @@ import fnmatch
 import functools
 import json
 import math
-import typing
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 
 import yaml
+
+from .typed_mapping import (  # noqa: F401  (ParameterError: re-exported, the package's name)
+    ParameterError,
+    _changes,
+    _expand,
+    _freeze,
+    _is_number,
+    _refused_key,
+    _schema,
+)
 
 Vec3 = tuple[float, float, float]
 
@@ -63,10 +72,6 @@ CONTACT_PAIRS: dict[str, tuple[tuple[str, ...], str]] = {
     "feet_floor": (("foot_l", "foot_r"), "floor"),
 }
 VARIANTS = ("default", "no-integrator", "high-stiffness")
-
-
-class ParameterError(ValueError):
-    """A parameter file or value is invalid; the message names the key."""
 
 
 @dataclass
@@ -173,6 +178,61 @@ class Simulation:
 
 
 @dataclass
+class Seat:
+    """The seat's kind (`apply_seat`): the paper's car seat, or a laboratory
+    seat (`ehm_drake/data/configurations`)."""
+
+    #: False: a seat without backrest: the back pads stand clear of the body
+    #: and carry nothing, and the trunk holds itself (`apply_seat`).
+    backrest: bool
+    #: True: a rigid seat: each body-seat contact is the tissue alone
+    #: (`softening.tissue.<pair>_stiffness`), no cushion in series.
+    rigid: bool
+
+
+@dataclass
+class TissueSoftening:
+    """The soft tissue (skin, fat, muscle) between the body and the seat under
+    the pelvis and thighs and at the back pads, softening with its own
+    recent movement (`ehm_drake.model.softening`)."""
+
+    enabled: bool
+    #: The tissue's own normal stiffness at rest at each contact pair (N/m):
+    #: the pair's contact stiffness on a rigid seat; on a compliant seat the
+    #: contact stiffness is this in series with the seat's.
+    pelvis_pan_stiffness: float
+    thighs_pan_stiffness: float
+    lower_back_pad_stiffness: float
+    upper_back_pad_stiffness: float
+    #: Fraction of the tissue stiffness lost when its movement is far above
+    #: the critical amplitude.
+    max_loss: float
+    #: RMS tissue deformation (m) at which half of `max_loss` is lost.
+    critical_rms_m: float
+    #: Memory of the movement measure (s): its running mean and variance
+    #: follow the deformation with this time constant.
+    time_constant_s: float
+
+
+@dataclass
+class MuscleSoftening:
+    """Short-range stiffness of the trunk and hip muscles (the PID's active
+    stiffness kp), softening with the joints' own recent movement."""
+
+    enabled: bool
+    max_loss: float
+    #: RMS joint rotation (rad) at which half of `max_loss` is lost.
+    critical_rms_rad: float
+    time_constant_s: float
+
+
+@dataclass
+class Softening:
+    tissue: TissueSoftening
+    muscle: MuscleSoftening
+
+
+@dataclass
 class Variants:
     #: Factor on all passive joint stiffnesses in the `high-stiffness` variant.
     high_stiffness_factor: float
@@ -187,6 +247,8 @@ class ModelParams:
     restraints: Restraints
     simulation: Simulation
     variants: Variants
+    seat: Seat
+    softening: Softening
 
     def to_dict(self) -> dict:
         return _to_builtin(dataclasses.asdict(self))
@@ -274,6 +336,16 @@ RANGES: tuple[Range, ...] = (
           reason="at least 100 Hz, at most the simulation rate 1/simulation.time_step_s"),
     Range("variants.high_stiffness_factor", "", 1.0,
           reason="factor raising the passive joint stiffness"),
+    Range("softening.tissue.*_stiffness", "N/m", lo_open=True,
+          reason="the tissue's own stiffness at rest; at least the pair's contact stiffness"),
+    Range("softening.*.max_loss", "fraction", 0.0, 0.95,
+          reason="fraction of the stiffness that movement can take away"),
+    Range("softening.tissue.critical_rms_m", "m", lo_open=True,
+          reason="RMS deformation at which half the loss is reached"),
+    Range("softening.muscle.critical_rms_rad", "rad", lo_open=True,
+          reason="RMS rotation at which half the loss is reached"),
+    Range("softening.*.time_constant_s", "s", lo_open=True,
+          reason="memory of the running movement measure"),
     Range("*", ""),
 )
 
@@ -352,6 +424,17 @@ def validate(params: ModelParams) -> ModelParams:
     # period between steps would repeat a held sample at irregular times
     # (a 2 ms step at 200 Hz: samples 1 ms stale every other time, which
     # moved a transmissibility bin by up to 35% in bench_step_accuracy).
+    # The tissue's own stiffness is the contact pair's on a rigid seat and
+    # more on a compliant one (the seat in series); never less.
+    tissue = params.softening.tissue
+    for pair in () if not tissue.enabled else ("pelvis_pan", "thighs_pan", "lower_back_pad", "upper_back_pad"):
+        k_t = getattr(tissue, f"{pair}_stiffness")
+        k_c = getattr(params.contact, pair).stiffness
+        if k_t < k_c * (1.0 - 1e-12):
+            raise ParameterError(
+                f"softening.tissue.{pair}_stiffness = {k_t!r}: must be at least "
+                f"contact.{pair}.stiffness ({k_c:g} N/m; the tissue alone is at least as "
+                "stiff as tissue and seat in series; equal on a rigid seat)")
     sim = params.simulation
     k = 1.0 / (sim.output_rate_hz * sim.time_step_s)
     if abs(k - round(k)) > 1e-6 * k:
@@ -364,149 +447,6 @@ def validate(params: ModelParams) -> ModelParams:
 # ---------------------------------------------------------------------------
 # Loading: Drake's yaml_load_typed does the typing and the merge over the defaults
 # ---------------------------------------------------------------------------
-
-
-@functools.cache
-def _hints(cls) -> dict:
-    return typing.get_type_hints(cls)
-
-
-def _vector_size(tp) -> int | None:
-    return len(typing.get_args(tp)) if typing.get_origin(tp) is tuple else None
-
-
-@functools.cache
-def _schema(cls):
-    """`cls` as Drake's yaml_load_typed reads it: the same fields, with the
-    fixed-size vectors (tuples, which it does not read) as list[float], and
-    defaults (None, or the empty group) so that it can start from scratch."""
-    spec = []
-    for f in fields(cls):
-        tp = _hints(cls)[f.name]
-        if dataclasses.is_dataclass(tp):
-            spec.append((f.name, _schema(tp), dataclasses.field(default_factory=_schema(tp))))
-        else:
-            spec.append((f.name, list[float] if _vector_size(tp) else tp, None))
-    return dataclasses.make_dataclass(cls.__name__, spec)
-
-
-def _freeze(obj, cls):
-    """The loaded `obj` (a schema instance, or `cls` with lists) as `cls`."""
-    kwargs = {}
-    for f in fields(cls):
-        v, tp = getattr(obj, f.name), _hints(cls)[f.name]
-        if dataclasses.is_dataclass(tp):
-            v = _freeze(v, tp)
-        elif _vector_size(tp):
-            v = tuple(v)
-        kwargs[f.name] = v
-    return cls(**kwargs)
-
-
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-def _reads_as_number(v) -> bool:
-    """A number, or text that Drake's loader reads as one (as "8.0e4", which
-    YAML 1.1 leaves a string)."""
-    if isinstance(v, str):
-        try:
-            float(v)
-        except ValueError:
-            return False
-        return True
-    return _is_number(v)
-
-
-def _expand(data, cls, path: str) -> dict:
-    """What yaml_load_typed cannot do itself: check that groups are mappings
-    and vectors lists of their size, and expand one number given for a
-    vector to all its components.  Returns a new mapping (keys unknown to
-    `cls` are kept for the loader to report)."""
-    if not isinstance(data, Mapping):
-        raise ParameterError(f"{path or 'parameters'}: expected a mapping, got {data!r}")
-    out = dict(data)
-    for name, value in data.items():
-        tp = _hints(cls).get(name)
-        key = f"{path}.{name}" if path else str(name)
-        if tp is not None and dataclasses.is_dataclass(tp):
-            out[name] = _expand(value, tp, key)
-        elif tp is not None and (n := _vector_size(tp)):
-            if _reads_as_number(value):
-                out[name] = [value] * n
-            elif not isinstance(value, (list, tuple)) or len(value) != n:
-                raise ParameterError(f"{key}: expected a list of {n} numbers, got {value!r}")
-    return out
-
-
-_EXPECTED = {float: "a number", bool: "true/false", str: "a string"}
-
-
-@functools.cache
-def _leaf_schema(tp):
-    """A one-field schema to load a single value of type `tp`."""
-    return dataclasses.make_dataclass(f"Leaf_{tp.__name__}",
-                                      [("value", tp, dataclasses.field(default=tp()))])
-
-
-def _refused_key(data: Mapping, cls, path: str = "") -> str | None:
-    """One line naming the first key of `data` (already `_expand`ed) that
-    Drake's loader refuses, or None.
-
-    Drake's own messages name only the innermost field ('damping', or '_'
-    for a list item), so after a failed load each value is loaded again on
-    its own, against its field's type, through the same public loader: the
-    loader decides what is refused, this names where."""
-    from pydrake.common.yaml import yaml_load_typed
-
-    names = [f.name for f in fields(cls)]
-    unknown = [str(k) for k in data if k not in names]
-    if unknown:
-        where = f"{path}." if path else ""
-        return (f"unknown parameter key: {', '.join(where + u for u in unknown)} "
-                f"(known here: {', '.join(names)})")
-    for name, value in data.items():
-        key = f"{path}.{name}" if path else name
-        tp = _hints(cls)[name]
-        if dataclasses.is_dataclass(tp):
-            if msg := _refused_key(value, tp, key):
-                return msg
-            continue
-        items = ([(f"{key}[{i}]", v) for i, v in enumerate(value)] if _vector_size(tp)
-                 else [(key, value)])
-        leaf = float if _vector_size(tp) else tp
-        for where, v in items:
-            try:
-                yaml_load_typed(schema=_leaf_schema(leaf),
-                                data=json.dumps({"value": v}, default=repr))
-            except (RuntimeError, ValueError, TypeError, OverflowError):
-                return f"{where}: expected {_EXPECTED[leaf]}, got {v!r}"
-    return None
-
-
-_MISSING = object()
-
-
-def _same(v, d) -> bool:
-    if isinstance(v, (list, tuple)) and isinstance(d, list):
-        return len(v) == len(d) and all(map(_same, v, d))
-    return type(v) is type(d) and repr(v) == repr(d)
-
-
-def _changes(data: Mapping, default: dict) -> dict:
-    """`data` without the values equal to `default`'s in type and value: the
-    loader keeps those anyway, and has less text to parse (callers such as
-    the sweep and the fit pass complete parameter sets)."""
-    out = {}
-    for k, v in data.items():
-        d = default.get(k, _MISSING) if isinstance(k, str) else _MISSING
-        if isinstance(v, Mapping) and isinstance(d, dict):
-            if sub := _changes(v, d):
-                out[k] = sub
-        elif d is _MISSING or not _same(v, d):
-            out[k] = v
-    return out
 
 
 def _typed(data: Mapping, *, over_defaults: bool = True) -> ModelParams:
@@ -552,7 +492,8 @@ def read_params_mapping(path: Path) -> dict:
     "params" unwrapped); errors name the file, on one line."""
     path = Path(path)
     if not path.is_file():
-        raise ParameterError(f"parameter file not found: {path}")
+        raise ParameterError(f"parameter file not found: {path} (or name a configuration: "
+                             f"{', '.join(configuration_names())})")
     text = path.read_text()
     is_json = path.suffix.lower() == ".json"
     try:
@@ -581,11 +522,37 @@ def params_from_dict(data: dict) -> ModelParams:
     return _typed(data)
 
 
+def configuration_names() -> tuple[str, ...]:
+    """The packaged configurations (`ehm_drake/data/configurations`): the
+    paper's car seat, the laboratory seats, the paper's linear model."""
+    folder = resources.files("ehm_drake") / "data" / "configurations"
+    return tuple(sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml")))
+
+
+def configuration_path(name: str) -> Path:
+    """The parameter file of the packaged configuration `name`."""
+    if name not in configuration_names():
+        raise ParameterError(f"unknown configuration {name!r}; choose from "
+                             f"{', '.join(configuration_names())}")
+    return Path(str(resources.files("ehm_drake") / "data" / "configurations" / f"{name}.yaml"))
+
+
+def resolve_params_path(path: str | Path) -> Path:
+    """`path` if it is a file, else the packaged configuration of that name
+    (``rigid_seat``, ...); a one-line error otherwise."""
+    p = Path(path)
+    if p.is_file() or str(path) not in configuration_names():
+        return p
+    return configuration_path(str(path))
+
+
 def load_params(path: str | Path | None = None) -> ModelParams:
-    """Default parameters, or those of the YAML/JSON file at `path` merged
-    over the defaults.  Errors name the file and the key."""
+    """Default parameters, or those of the YAML/JSON file at `path` (or of the
+    packaged configuration of that name, `configuration_names`) merged over
+    the defaults.  Errors name the file and the key."""
     if path is None:
         return _defaults().copy()
+    path = resolve_params_path(path)
     data = read_params_mapping(Path(path))
     try:
         return params_from_dict(data)

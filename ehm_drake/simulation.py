@@ -272,6 +272,10 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
     rctx = restraints.GetMyMutableContextFromRoot(ctx)
     prm = rctx.get_mutable_numeric_parameter(restraints.parameter_index)
     full = prm.CopyToVector()
+    # The body's softening acts about the running means, which are set where
+    # the body rests once it is found (`set_normal_reference`).
+    for softening in softening_systems(model):
+        softening.set_active(softening.GetMyMutableContextFromRoot(ctx), False)
     about_reference = full.copy()
     for block in ("normal_cubic_stiffness", "normal_linear_stiffness", "normal_linear_damping"):
         restraint_block(about_reference, block)[:] = 0.0
@@ -306,18 +310,35 @@ def static_equilibrium(model: EhmDiagram, tol: float = 1e-7, max_iterations: int
     smap.set(ctx, x)
     prm.SetFromVector(full)
     set_normal_reference(model, ctx)
+    for softening in softening_systems(model):
+        softening.set_active(softening.GetMyMutableContextFromRoot(ctx), True)
     return ctx, smap
 
 
 def set_normal_reference(model: EhmDiagram, root_context) -> None:
     """Reference of the restraints' extra normal forces := the current
-    normal displacement of each point (call at rest)."""
+    normal displacement of each point, and the body's softening at rest
+    there (its running means at the current deformation, no variance);
+    call at rest."""
     restraints = model.systems["shear_restraints"]
     rctx = restraints.GetMyMutableContextFromRoot(root_context)
     prm = rctx.get_mutable_numeric_parameter(restraints.parameter_index)
     v = prm.CopyToVector()
     restraint_block(v, "normal_reference")[:] = restraints.normal_displacement(rctx)
     prm.SetFromVector(v)
+    for softening in softening_systems(model):
+        from .systems.softening import softening_initial_state
+
+        sctx = softening.GetMyMutableContextFromRoot(root_context)
+        rest = softening_initial_state(softening.elements,
+                                       softening.rest_deformation(sctx))
+        sctx.get_mutable_discrete_state(softening.state_index).SetFromVector(rest)
+
+
+def softening_systems(model: EhmDiagram) -> list:
+    """The model's softening systems (`BodySoftening`: the body's own, and
+    a candidate effect's)."""
+    return [s for s in model.systems.values() if hasattr(s, "rest_deformation")]
 
 
 # ---------------------------------------------------------------------------

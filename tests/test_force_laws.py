@@ -26,8 +26,13 @@ RTOL = 1e-12
 RESTRAINT_OUTPUTS = ("point_forces", "normal_displacement", "deflection")
 
 
+#: The laws of `ForceLaws` are those of the paper's linear model; the body's
+#: softening is a system of its own (`tests/test_softening.py`).
+PAPER = "paper_linear"
+
+
 def implicit(h: float = 0.005):
-    p = load_params()
+    p = load_params(PAPER)
     p.simulation.design = "implicit"
     p.simulation.time_step_s = h
     return p
@@ -155,7 +160,7 @@ def test_the_merged_laws_are_the_separate_systems(design, variant):
     largest force.  The high-stiffness variant has stiff springs as SAP PD
     actuators (their part left out of both); the reference design's ball
     joints take the Cardan mapping."""
-    params = implicit() if design == "implicit" else reference_design(load_params())
+    params = implicit() if design == "implicit" else reference_design(load_params(PAPER))
     if variant == "high-stiffness" and design == "implicit":
         with pytest.warns(UserWarning, match="beyond the second-order step"):
             rig = Rig(params, variant)
@@ -198,7 +203,7 @@ def test_the_parts_keep_their_names_parameters_and_states(design):
     integral and the slip as state groups ``joint_pid`` and
     ``shear_restraints`` (the order of the separate systems' groups, so a
     settled state keeps its layout), and the plant fed without an Adder."""
-    params = implicit() if design == "implicit" else load_params()
+    params = implicit() if design == "implicit" else load_params(PAPER)
     assert params.simulation.design == design
     model = build_diagram(params, guard=False, seat_forces=False)
     laws = model.systems["force_laws"]
@@ -241,7 +246,7 @@ def test_the_pid_torque_is_a_cardan_torque(design):
     3% to 280% off on these states.)"""
     from ehm_drake.systems.joints import _BallIndex, cardan_rates
 
-    params = implicit() if design == "implicit" else load_params()
+    params = implicit() if design == "implicit" else load_params(PAPER)
     model = build_diagram(params, guard=False, seat_forces=False)
     laws, L = model.systems["force_laws"], model.hp.layout
     ctx = model.diagram.CreateDefaultContext()
@@ -303,7 +308,7 @@ def test_body_channels_are_bit_for_bit_the_per_marker_computation(design):
     """The channels computed for all markers at once are exactly (not just
     to rounding) those of the per-marker computation: the reference
     design's outputs must not change by a bit."""
-    params = load_params() if design == "reference" else implicit()
+    params = load_params(PAPER) if design == "reference" else implicit()
     model = build_diagram(params, guard=False, seat_forces=False)
     channels = model.systems["body_channels"]
     ctx = model.diagram.CreateDefaultContext()

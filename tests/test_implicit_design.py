@@ -22,6 +22,7 @@ from ehm_drake.model.plant import (
     step_damping_limits,
     step_split,
 )
+from ehm_drake.model.softening import long_range_contacts
 from ehm_drake.model.stepping import segment_frequencies
 from ehm_drake.params import CONTACT_PAIRS, apply_variant, load_params, reference_design
 from ehm_drake.signals import make_seat_signal
@@ -39,8 +40,10 @@ def implicit(h: float = 0.001):
 
 
 def _plant(params):
+    """The plant as `build_diagram` makes it: the contacts at their
+    long-range stiffness (`ehm_drake.model.softening`)."""
     builder = DiagramBuilder()
-    hp = add_seated_human(builder, params)
+    hp = add_seated_human(builder, long_range_contacts(params), rest_params=params)
     diagram = builder.Build()
     return hp, diagram
 
@@ -130,7 +133,7 @@ def test_a_step_beyond_the_second_order_one_is_warned_about():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         hp, _ = _plant(p)  # every part of the parameter file's body allows 5 ms
-    limits = step_damping_limits(hp.plant, hp.human, p, hp.body)
+    limits = step_damping_limits(hp.plant, hp.human, long_range_contacts(p), hp.body)
     assert {f"contact {pair}" for pair in CONTACT_PAIRS} <= set(limits)
     # The first to go: the lower-torso slab's pitch, against L5/S1 and L4/L5.
     first = min(limits, key=limits.get)

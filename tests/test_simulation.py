@@ -365,4 +365,6 @@ def test_state_map_covers_all_discrete_states(params):
     smap = StateMap(model)
     nx = 2 * model.plant.num_positions() + model.hp.layout.num_rotational
     nx += 2 * len(model.systems["shear_restraints"].points)
+    # The body's softening: a running mean and variance per element.
+    nx += 2 * model.systems["body_softening"].elements.n
     assert smap.size == nx

@@ -36,6 +36,8 @@ def _rigid_params():
         "restraints": {**{k: {"stiffness": 3e7, "damping": 5e3, "force_limit": 1e5}
                           for k in PAN},
                        **{k: {"stiffness": 0.0, "damping": 0.0} for k in OFF}},
+        # A rigid body: nothing softens.
+        "softening": {"tissue": {"enabled": False}},
     })
 
 
@@ -107,20 +109,31 @@ FREQS = np.linspace(0.2, 12.0, 591)
 
 @pytest.fixture(scope="module")
 def linear_variants():
-    from ehm_drake.analysis.linear import linearize
+    from ehm_drake.analysis.equivalent import SeatSpectrum, equivalent_linear
     from ehm_drake.params import apply_variant, load_params
+    from ehm_drake.signals import PAPER_RMS
 
     p = load_params()
     out = {}
+    # The body softens with the vibration: each variant linearized at the
+    # paper's level (0.19 m/s^2, random 0.1-12 Hz, vertical).
+    spectrum = SeatSpectrum.flat("z", PAPER_RMS)
     for v in ("default", "high-stiffness"):
         model = build_diagram(apply_variant(p, v) if v != "default" else p)
         eq, _ = static_equilibrium(model)
-        out[v] = linearize(model, eq)
+        out[v] = equivalent_linear(model, spectrum, eq).linear
+        if v == "default":
+            # The middle of the laboratory studies' range of levels.
+            out["default at 1 m/s2"] = equivalent_linear(
+                model, SeatSpectrum.flat("z", 1.0), eq).linear
     return out
 
 
 def test_vertical_resonance_is_in_the_published_range(linear_variants):
-    lm = linear_variants["default"]
+    # The published ranges come from studies at 0.25-2 m/s^2: the model at
+    # 1 m/s^2 (at the paper's 0.19 m/s^2 it resonates higher, 5.7 Hz for the
+    # apparent mass and 6.3 Hz at the head: the body softens with level).
+    lm = linear_variants["default at 1 m/s2"]
     f, mod, _ = lm.apparent_mass(FREQS, "z")["z"]
     i = int(np.argmax(mod))
     lo, hi = LITERATURE["apparent_mass_z"]["f_hz"]

@@ -397,6 +397,8 @@ def _output_names(model: EhmDiagram, ports) -> list[str]:
             names += [f"torque:{n}" for n in model.hp.layout.names]
         elif p == "his_torque":
             names += ["his_tx", "his_ty", "his_tz"]
+        elif p == "softening_deformation":
+            names += [f"softening:{n}" for n in model.systems["body_softening"].elements.names]
     return names
 
 

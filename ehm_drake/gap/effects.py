@@ -55,6 +55,13 @@ Ranges (strength 1) and reasons:
   damper to the seat frame, stiffness from 5e6 N/m (rigid) down to 4e4 N/m
   (soft automotive cushion with the occupant's share ~40 kg: 5 Hz), damping
   ratio 0.2.
+* softening: the seated tissue (pan and back contacts) loses, beyond the
+  model's own softening (`ehm_drake.model.softening`), up to 50% of its
+  contact's long-range stiffness as it moves (half of it at the model's
+  critical amplitude, 0.07 mm RMS): the size of the nonlinearity varies
+  between people and with muscle tension (Matsumoto & Griffin 2002: the
+  resonance fell 19% between 0.35 and 1.4 m/s^2 with normal tension, 12%
+  with the buttocks tensed).
 """
 
 from __future__ import annotations
@@ -442,6 +449,44 @@ class SeatCushionDynamics(CandidateEffect):
             "cushion_spring_rest", joint.frame_on_parent(), RigidTransform([0.0, 0.0, lift])))
         plant.AddForceElement(LinearBushingRollPitchYaw(
             rest, joint.frame_on_child(), zero, zero, np.array([0.0, 0.0, k]), zero))
+
+
+# ---------------------------------------------------------------------------
+# softening: the tissue losing more stiffness with movement than the model's
+# ---------------------------------------------------------------------------
+
+
+@_candidate(Effect(
+    "softening", "the seated tissue losing more stiffness with movement than the model's",
+    (EffectParam("extra_loss", "-", 0.0, 0.5, bounds=(0.0, 0.9)),),
+    "level", True,
+    "body-on-seat resonances (vertical pelvis, trunk and head; the apparent mass) move DOWN "
+    "with level beyond the model's own softening; no extra mode"))
+class Softening(CandidateEffect):
+    """A second `BodySoftening` system (named "softening") on the tissue's
+    contact points: each loses up to `extra_loss` of its contact's
+    long-range stiffness as it moves, with the model's critical amplitude
+    and memory (`ehm_drake.model.softening`); a subject whose nonlinearity
+    is larger than the model's (its size varies between people and with
+    their muscle tension: Matsumoto & Griffin 2002, J Sound Vib 253(1):77-92)."""
+
+    def add_force_systems(self, parts) -> list:
+        from ..model.restraints import restraint_points
+        from ..model.softening import TISSUE_PAIRS, ElementSet
+        from ..systems.softening import BodySoftening
+
+        r = self.values["extra_loss"]
+        if not r > 0:
+            return []
+        pts = [p for p in restraint_points(parts.hp) if p.pair in TISSUE_PAIRS]
+        t = parts.params.softening.tissue
+        k = np.array([getattr(parts.params.contact, p.pair).stiffness for p in pts])
+        n = len(pts)
+        elements = ElementSet(("extra",) * n, tuple(p.name for p in pts), k, k,
+                              np.full(n, r), np.full(n, t.critical_rms_m),
+                              np.full(n, t.time_constant_s))
+        return [parts.add_system(self.name, BodySoftening(
+            parts.hp.plant, parts.hp.layout, elements, pts, [], parts.time_step))]
 
 
 # ---------------------------------------------------------------------------

@@ -49,9 +49,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
+from ..model.softening import equivalent_loss, loss_fraction, tissue_element_set
+from ..params import params_from_dict
 from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, EffectParam
 from .family import (
     GROUP_NAMES,
+    RESTRAINT_GROUPS,
     FamilySpec,
     ModelFamily,
     response,
@@ -214,7 +217,7 @@ class TestInput:
 #: a subject comes with level differences (`reference._evidence` holds it
 #: to them).  A backrest separation is level-dependent but not amplitude
 #: driven: a pad beyond reach is gone at any amplitude.
-AMPLITUDE_DRIVEN = ("seat_foam_stiffening", "seat_friction", "cocontraction")
+AMPLITUDE_DRIVEN = ("seat_foam_stiffening", "seat_friction", "cocontraction", "softening")
 
 
 @dataclass
@@ -279,6 +282,13 @@ BASE_BOUND = 0.7  # |log-scale| bound of the base refit (x2)
 #: Increments of the equivalent directions below this are taken as zero
 #: (then tests share their eigen-decomposition).
 EQUIVALENT_TOL = 1e-3
+#: The body's softening: the tissue's movement is iterated to this relative
+#: change, at most this many times per statistics update.
+SOFTENING_TOLERANCE = 2e-3
+SOFTENING_ITERATIONS = 25
+#: Restraint groups whose tissue softens, and the contact pair of each group.
+TISSUE_GROUPS = ("pelvis", "thighs", "lower_pad", "upper_pad")
+RESTRAINT_PAIRS = {g: p for p, g in RESTRAINT_GROUPS.items()}
 #: Slip relaxation rates below this (1/s) are taken as zero: slower than the
 #: lowest analysed frequency by two decades.
 CREEP_TOL_PER_S = 2 * math.pi * 0.1 / 100
@@ -328,6 +338,11 @@ class Predictor:
         self._test_rows = [self.rows.test_mask(t.direction, t.level) for t in self.tests]
         if not self.sigmas:
             self.sigmas = [None] * len(self.tests)
+        info = self.statics.info
+        pairs = [RESTRAINT_PAIRS[g] for g in info.groups]
+        params = params_from_dict(self.family.family.params)
+        self._tissue = tissue_element_set(params, info.names, pairs)
+        self._critical = params.softening.tissue.critical_rms_m
 
     @property
     def n_base(self) -> int:
@@ -402,6 +417,23 @@ class Predictor:
             for g in ("pelvis", "thighs", "lower_pad", "upper_pad"):
                 sel = self._group_of == g
                 e[idx[f"k_normal:{g}"]] += 3.0 * gamma * float(np.mean(s_n[sel] ** 2))
+        # The body's own softening (`ehm_drake.model.softening`): at the
+        # test's movement each tissue point has lost part of the short-range
+        # stiffness the family was linearized with (at rest).
+        mask, elements = self._tissue
+        if elements.n or "softening" in values:
+            rel = np.zeros(n)
+            if elements.n:
+                rel[mask] = -equivalent_loss(elements, s_n[mask]) / info.k_contact[mask]
+            if "softening" in values:
+                # The candidate's extra loss, in units of the contact's own
+                # (long-range) stiffness.
+                tissue = np.isin(self._group_of, TISSUE_GROUPS)
+                rel[tissue] -= loss_fraction(s_n[tissue], self._critical,
+                                             values["softening"]["extra_loss"])
+            for g in TISSUE_GROUPS:
+                sel = self._group_of == g
+                e[idx[f"k_normal:{g}"]] += float(np.mean(rel[sel]))
         e[np.abs(e) < EQUIVALENT_TOL] = 0.0
         lam[lam < CREEP_TOL_PER_S] = 0.0
         return np.concatenate([e, lam])
@@ -500,20 +532,40 @@ class Predictor:
         groups = self.family.output_groups
         rows_n = groups["restraint_normal_displacement"]
         rows_d = groups["restraint_deflection"]
-        new = []
-        for i, t in enumerate(self.tests):
+        nn = rows_n.stop - rows_n.start
+        sel = np.r_[np.arange(rows_n.start, rows_n.stop), np.arange(rows_d.start, rows_d.stop)]
+        softening = self._tissue[1].n > 0 or "softening" in self.candidate.effects
+
+        def statistics(i, t):
             mats, coords = self.test_matrices(theta, i)
-            nn = rows_n.stop - rows_n.start
-            sel = np.r_[np.arange(rows_n.start, rows_n.stop), np.arange(rows_d.start, rows_d.stop)]
             H = self._response(mats, coords, t.psd_f, [t.input_index], sel)[:, :, 0]
             df = np.gradient(t.psd_f)
             w = t.psd * df
             P = np.abs(H) ** 2
             var = (P * w[:, None]).sum(axis=0)
             var_rate = (P * ((2 * np.pi * t.psd_f) ** 2 * w)[:, None]).sum(axis=0)
-            new.append({"normal": np.sqrt(var[:nn]), "deflection": np.sqrt(var[nn:]),
-                        "deflection_rate": np.sqrt(var_rate[nn:])})
-        self.sigmas = new
+            return {"normal": np.sqrt(var[:nn]), "deflection": np.sqrt(var[nn:]),
+                    "deflection_rate": np.sqrt(var_rate[nn:])}
+
+        for i, t in enumerate(self.tests):
+            st = statistics(i, t)
+            # The body's softening depends on the movement it shapes: iterate
+            # the tissue's movement to self-consistency (under-relaxed in the
+            # log, as `ehm_drake.analysis.equivalent` does).
+            for _ in range(SOFTENING_ITERATIONS if softening else 0):
+                old = self.sigmas[i]
+                self.sigmas[i] = st
+                if old is not None:
+                    st = dict(st, normal=np.sqrt(np.maximum(old["normal"], 1e-15)
+                                                 * np.maximum(st["normal"], 1e-15)))
+                    self.sigmas[i] = st
+                new = statistics(i, t)
+                change = np.max(np.abs(new["normal"] - st["normal"])
+                                / np.maximum(new["normal"], 1e-12))
+                st = new
+                if change < SOFTENING_TOLERANCE:
+                    break
+            self.sigmas[i] = st
 
 
 # ---------------------------------------------------------------------------

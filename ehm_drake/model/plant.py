@@ -84,6 +84,8 @@ from .sdf_writer import (
     packaged_sdf,
     seat_sdf,
 )
+from .seats import adjust_seat_for_sink, remove_backrest
+from .softening import static_sink
 from .stepping import (
     SPINE_AXIAL,
     STABLE_OMEGA_H,
@@ -220,17 +222,21 @@ class HumanPlant:
 
 
 def _load_models(plant: MultibodyPlant, body: Body, measures: BodyMeasures,
-                 extensions: tuple[ModelExtension, ...], cardan: bool):
+                 extensions: tuple[ModelExtension, ...], cardan: bool,
+                 packaged_seat: bool = True):
     """The packaged SDF for the reference body without extensions, else
     SDF generated from `body` (and the extensions' seat options); with
-    `cardan`, the human's joints as Cardan chains of revolute joints."""
+    `cardan`, the human's joints as Cardan chains of revolute joints.
+    `packaged_seat` False: the seat from `body` (its parts moved, e.g. a
+    seat without backrest)."""
     # The SDFs refer to no file or `package://` URL: the parser needs no
     # package map (`configure_parser` costs 0.25 ms a build).
     parser = Parser(plant)
     if measures == REFERENCE and not extensions:
         name = HUMAN_CARDAN_SDF_NAME if cardan else HUMAN_SDF_NAME
         (human,) = parser.AddModelsFromString(packaged_sdf(name), "sdf")
-        (seat,) = parser.AddModelsFromString(packaged_sdf(SEAT_SDF_NAME), "sdf")
+        (seat,) = parser.AddModelsFromString(
+            packaged_sdf(SEAT_SDF_NAME) if packaged_seat else seat_sdf(body), "sdf")
     else:
         seat_options = merge_options(extensions, "seat_options")
         (human,) = parser.AddModelsFromString(
@@ -244,6 +250,7 @@ def add_seated_human(
     params: ModelParams,
     measures: BodyMeasures = REFERENCE,
     effects: dict | None = None,
+    rest_params: ModelParams | None = None,
 ) -> HumanPlant:
     """Add the plant (+ SceneGraph) of the seated human to `builder`.
 
@@ -253,13 +260,21 @@ def add_seated_human(
     `modify_body`, `seat_options`, `add_plant_elements`, see
     `ehm_drake.model.extensions`) change the body, the seat and the force
     elements; the others act through the diagram's systems (see
-    `ehm_drake.diagram.build_diagram`).
+    `ehm_drake.diagram.build_diagram`).  `rest_params`: the parameters
+    with the contacts' stiffness at rest, when `params` has their long-range
+    stiffness (`ehm_drake.model.softening.long_range_contacts`): the seat is
+    adjusted to the deeper sink (`adjust_seat_for_sink`).
     """
     effects = validate_extensions(effects)
     extensions = resolve_extensions(effects)
     body = build_body(measures, **merge_options(extensions, "body_options"))
     for ext in extensions:
         ext.modify_body(body)
+    if not params.seat.backrest:
+        remove_backrest(body)
+    sink = static_sink(rest_params, body.total_mass * 9.81, NOMINAL_LOAD_SHARE) \
+        if rest_params is not None else {}
+    adjust_seat_for_sink(body, sink)
     config = MultibodyPlantConfig(
         time_step=params.simulation.time_step_s,
         discrete_contact_approximation="sap",
@@ -271,7 +286,8 @@ def add_seated_human(
     plant, scene_graph = AddMultibodyPlant(config, builder)
     plant.set_name("plant")
     design = params.simulation.design
-    human, seat = _load_models(plant, body, measures, extensions, design == "implicit")
+    human, seat = _load_models(plant, body, measures, extensions, design == "implicit",
+                               packaged_seat=params.seat.backrest and not sink)
     pelvis = plant.GetBodyByName("pelvis", human)
     free = plant.AddJoint(RpyFloatingJoint("pelvis_free", plant.world_frame(), pelvis.body_frame()))
     free.set_default_translation(body.segments["pelvis"].origin_W)

@@ -1,0 +1,189 @@
+"""Equivalent-linear models: the linearization of the body at a test's
+vibration level.
+
+The model's only level-dependent part is the body's softening
+(`ehm_drake.model.softening`): each element acts as a linear spring whose
+stiffness depends on its RMS movement, which depends on the response, which
+depends on the stiffness.  `equivalent_linear` solves that loop for a seat
+excitation of given spectrum: linearize with every element's RMS movement
+frozen (the `BodySoftening` system's ``rms_fixed`` parameter), compute the
+elements' RMS deformation from the linear response to the excitation's
+spectrum, and repeat until it stops changing.  Without softening (the
+paper's linear model) it is one linearization.
+
+The excitation's spectrum is `SeatSpectrum`: a one-sided PSD of the seat
+acceleration per axis ((m/s^2)^2/Hz on a frequency grid), from a flat band
+and an RMS level (`SeatSpectrum.flat`, the form of the project's random
+signals, `ehm_drake.signals.band_limited_noise`), from a recorded signal
+(`SeatSpectrum.of_signal`), or for a sinusoid (`SeatSpectrum.sine`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..signals import BAND_HZ
+
+#: Relative change of every element's RMS movement at which the iteration
+#: stops, and the most iterations.
+TOLERANCE = 2e-3
+MAX_ITERATIONS = 30
+
+
+class EquivalentLinearError(RuntimeError):
+    """The equivalent-linear iteration did not settle (or the model is
+    unstable at the test's level)."""
+
+
+@dataclass(frozen=True)
+class SeatSpectrum:
+    """One-sided PSD of the seat acceleration: `psd[k, axis]` on `freqs[k]`
+    ((m/s^2)^2/Hz; a sinusoid is one bin holding its mean square), axes x,
+    y, z."""
+
+    freqs: np.ndarray
+    psd: np.ndarray  # (nf, 3)
+    description: str = ""
+    df: np.ndarray = field(default=None, repr=False)  # bin widths
+
+    def __post_init__(self):
+        f = np.asarray(self.freqs, float)
+        P = np.asarray(self.psd, float)
+        if f.ndim != 1 or P.shape != (len(f), 3):
+            raise ValueError(f"spectrum: freqs {f.shape} and psd {P.shape} must be (n,), (n, 3)")
+        if not (np.all(np.isfinite(P)) and np.all(P >= 0) and np.all(f > 0)):
+            raise ValueError("spectrum: frequencies must be > 0 and the PSD finite, >= 0")
+        object.__setattr__(self, "freqs", f)
+        object.__setattr__(self, "psd", P)
+        if self.df is None:
+            object.__setattr__(self, "df", np.gradient(f) if len(f) > 1 else np.ones(1))
+
+    @property
+    def rms(self) -> np.ndarray:
+        """RMS acceleration per axis (m/s^2)."""
+        return np.sqrt(np.sum(self.psd * self.df[:, None], axis=0))
+
+    @classmethod
+    def flat(cls, direction: str, rms: float, band=BAND_HZ, resolution_hz: float = 0.02):
+        """Flat between band[0] and band[1] Hz on each axis of `direction`
+        ("x", "z", "xyz", ...), `rms` m/s^2 per axis."""
+        lo, hi = float(band[0]), float(band[1])
+        if not (0 < lo < hi) or not rms > 0:
+            raise ValueError(f"flat spectrum: band {band} and rms {rms} must be positive")
+        f = np.arange(lo + resolution_hz / 2, hi, resolution_hz)
+        P = np.zeros((len(f), 3))
+        for d in direction:
+            P[:, "xyz".index(d)] = rms**2 / (hi - lo)
+        return cls(f, P, f"{direction} flat {lo:g}-{hi:g} Hz, {rms:g} m/s^2 RMS",
+                   np.full(len(f), resolution_hz))
+
+    @classmethod
+    def sine(cls, direction: str, frequency_hz: float, rms: float):
+        """A sinusoid of `rms` m/s^2 at `frequency_hz` on each axis of
+        `direction`."""
+        P = np.zeros((1, 3))
+        for d in direction:
+            P[0, "xyz".index(d)] = rms**2
+        return cls(np.array([float(frequency_hz)]), P,
+                   f"{direction} sine {frequency_hz:g} Hz, {rms:g} m/s^2 RMS", np.ones(1))
+
+    @classmethod
+    def of_signal(cls, signal, resolution_hz: float = 0.05):
+        """The PSD of a `SeatSignal`'s steady part (Welch, Hann)."""
+        from scipy.signal import welch
+
+        a = signal.acceleration[signal.sample_index(signal.steady_start):]
+        fs = 1.0 / signal.time_step
+        nper = min(len(a), int(round(fs / resolution_hz)))
+        f, P = welch(a, fs=fs, nperseg=nper, axis=0, detrend="constant")
+        keep = (f > 0) & (f <= 0.5 * fs)
+        return cls(f[keep], P[keep], "recorded signal")
+
+
+@dataclass
+class EquivalentLinear:
+    """The linear model at a test's level and what the iteration found."""
+
+    linear: object  # LinearModel
+    spectrum: SeatSpectrum
+    element_names: tuple[str, ...]
+    element_kinds: tuple[str, ...]
+    movement_rms: np.ndarray  # per element (m or rad)
+    stiffness_loss: np.ndarray  # per element (N/m or N m/rad)
+    iterations: int
+
+    def summary(self) -> dict:
+        return {"spectrum": self.spectrum.description, "iterations": self.iterations,
+                "elements": [{"name": n, "kind": k, "movement_rms": float(s),
+                              "stiffness_loss": float(dk)}
+                             for n, k, s, dk in zip(self.element_names, self.element_kinds,
+                                                    self.movement_rms, self.stiffness_loss,
+                                                    strict=True)]}
+
+
+def element_rms(linear, spectrum: SeatSpectrum) -> np.ndarray:
+    """RMS of each softening element's deformation in the linear response
+    to `spectrum` (the ``softening_deformation`` output)."""
+    H = linear.frequency_response(spectrum.freqs, "softening_deformation")  # (nf, n, 3)
+    w = spectrum.psd * spectrum.df[:, None]  # (nf, 3)
+    return np.sqrt(np.einsum("fnu,fu->n", np.abs(H) ** 2, w))
+
+
+def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=None,
+                      tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATIONS,
+                      fd_step: float | None = None) -> EquivalentLinear:
+    """The linearization of `model` (an `EhmDiagram` built without a signal)
+    at the level of `spectrum`, about its static equilibrium (computed when
+    `root_context` is None).  `outputs`: the output ports to linearize
+    (default `ehm_drake.analysis.linear.OUTPUT_PORTS`)."""
+    from ..simulation import static_equilibrium
+    from .linear import FD_STEP, OUTPUT_PORTS, linearize
+
+    if root_context is None:
+        root_context, _ = static_equilibrium(model)
+    soft = model.systems.get("body_softening")
+    ports = list(outputs or OUTPUT_PORTS)
+    step = FD_STEP if fd_step is None else fd_step
+    if soft is None:
+        lin = linearize(model, root_context, method="fd", fd_step=step, outputs=ports)
+        return EquivalentLinear(lin, spectrum, (), (), np.zeros(0), np.zeros(0), 1)
+    if "softening_deformation" not in ports:
+        ports.append("softening_deformation")
+    elements = soft.elements
+    sctx = soft.GetMyMutableContextFromRoot(root_context)
+    from ..model.softening import equivalent_loss
+
+    s = np.zeros(elements.n)
+    history = []
+    try:
+        for it in range(1, max_iterations + 1):
+            soft.set_rms(sctx, s)
+            lin = linearize(model, root_context, method="fd", fd_step=step, outputs=ports)
+            if not lin.is_stable:
+                raise EquivalentLinearError(
+                    f"the model is unstable at {spectrum.description} (iteration {it}, "
+                    f"element RMS movement up to {np.max(s):.3g})")
+            s_new = element_rms(lin, spectrum)
+            history.append(s_new)
+            change = np.max(np.abs(s_new - s) / np.maximum(s_new, 1e-12))
+            if change < tolerance:
+                s = s_new
+                break
+            # Under-relaxed in the log (the map s -> s_new is decreasing in s's
+            # stiffness loss, so a full step can oscillate).
+            s = np.sqrt(np.maximum(s, 1e-12) * s_new) if it > 1 else s_new
+        else:
+            raise EquivalentLinearError(
+                f"the equivalent-linear iteration did not settle in {max_iterations} steps "
+                f"at {spectrum.description} (last change {change:.2g})")
+    finally:
+        # The context keeps the running measure (as the caller gave it).
+        soft.set_rms(sctx, None)
+    return EquivalentLinear(lin, spectrum, elements.names, elements.kinds, s,
+                            equivalent_loss(elements, s), it)
+
+
+__all__ = ["EquivalentLinear", "EquivalentLinearError", "SeatSpectrum", "element_rms",
+           "equivalent_linear"]

@@ -1,0 +1,209 @@
+"""`BodySoftening`: the body's tissue and muscle stiffness falling with
+their own recent movement (the law: `ehm_drake.model.softening`).
+
+Elements: the seated tissue under the pelvis and thighs (one per restraint
+point of those contact pairs, acting along the pan's normal at the point)
+and the trunk and hip muscles (one per rotational DoF of those joint
+groups, about its Cardan angle).  Each holds a running mean and variance of
+its deformation (discrete state) and applies the stiffness that its RMS
+movement takes away, about the running mean (so nothing at rest).
+
+A `TemplateSystem` (float, AutoDiffXd).  Inputs ``state``; outputs
+``generalized_force`` (nv), ``deformation`` (per element, m or rad),
+``seat_forces`` (the tissue elements' force on the body summed per seat
+part, 12, N, as the restraints' ``seat_forces``),
+``movement_rms`` (per element: the RMS of its
+deformation, m or rad) and ``stiffness_loss`` (per element, N/m or
+N m/rad).  Discrete state: the running means, then the running variances.
+Numeric parameter: ``rms_fixed`` per element, the RMS movement to use in
+place of the running one when >= 0 (the equivalent-linear models freeze it
+at a test's level; -1 = the running value), then ``active`` (1; 0 while the
+static equilibrium is solved, when the running means are not yet where the
+body rests).
+
+Each element applies, about its running mean, the stiffness
+`element_spring` gives: a tissue element its short-range stiffness on the
+contact's long-range one, a muscle element minus what it has lost
+(`ehm_drake.model.softening`, "Short range on long range").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydrake.systems.framework import BasicVector_, LeafSystem_
+
+from ..model.plant import JointLayout
+from ..model.softening import ElementSet, element_spring, equivalent_loss, stationary_rms
+from . import PlantScratch, define_system
+from .joints import _BallIndex, cardan_to_generalized
+from .seat import SEAT_PART_NAMES, RestraintGeometry, in_contact
+
+
+@define_system("BodySoftening_", __name__)
+def BodySoftening_(T):
+    class Impl(LeafSystem_[T]):
+        """See the module docstring.  Arguments: the plant, its
+        `JointLayout`, the `ElementSet` (tissue elements first, in the
+        order of `points`), the restraint points of the tissue elements,
+        the muscle elements' indices into the rotational DoFs, the period."""
+
+        def _construct(self, plant, layout: JointLayout, elements: ElementSet, points,
+                       muscle_dofs, period: float, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._args = (plant, layout, elements, list(points), np.asarray(muscle_dofs, int),
+                          float(period))
+            self._layout = layout
+            self._elements = elements
+            self._scratch = PlantScratch(plant, T)
+            p = self._scratch.plant
+            self._nq, self._nv = p.num_positions(), p.num_velocities()
+            self._n_tissue = len(points)
+            self._muscle = self._args[4]
+            assert self._n_tissue + len(self._muscle) == elements.n
+            self._geometry = RestraintGeometry(p, points) if len(points) else None
+            self._ball = _BallIndex(layout)
+            self._alpha = float(period) / elements.time_constant
+            n = elements.n
+            self._state_port = self.DeclareVectorInputPort("state", self._nq + self._nv)
+            self._param = self.DeclareNumericParameter(
+                BasicVector_[T](np.append(np.full(n, -1.0), 1.0)))
+            self._stats = self.DeclareDiscreteState(2 * n)
+            self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+            self.DeclareVectorOutputPort("generalized_force", self._nv, self._calc_force)
+            self.DeclareVectorOutputPort("deformation", n, self._calc_deformation)
+            self.DeclareVectorOutputPort("seat_forces", 3 * len(SEAT_PART_NAMES),
+                                         self._calc_seat_forces)
+            self.DeclareVectorOutputPort("movement_rms", n, self._calc_rms)
+            self.DeclareVectorOutputPort("stiffness_loss", n, self._calc_loss)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, *other._args, converter=converter)
+
+        @property
+        def elements(self) -> ElementSet:
+            return self._elements
+
+        @property
+        def parameter_index(self):
+            return self._param
+
+        @property
+        def state_index(self):
+            return self._stats
+
+        def set_active(self, context, active: bool) -> None:
+            """Switch the forces on or off in this system's `context`."""
+            prm = context.get_mutable_numeric_parameter(self._param)
+            v = prm.CopyToVector()
+            v[-1] = 1.0 if active else 0.0
+            prm.SetFromVector(v)
+
+        def set_rms(self, context, rms) -> None:
+            """Freeze the RMS movement at `rms` per element (None: the running
+            value) in this system's `context`."""
+            prm = context.get_mutable_numeric_parameter(self._param)
+            v = prm.CopyToVector()
+            v[:-1] = -1.0 if rms is None else np.asarray(rms, float)
+            prm.SetFromVector(v)
+
+        def rest_deformation(self, context) -> np.ndarray:
+            """Each element's deformation at the context's state (`context`:
+            this system's)."""
+            return self._deformation(context)[0]
+
+        def _deformation(self, context):
+            """(deformation per element, the tissue points' normal Jacobian
+            rows or None, in-contact flags): the tissue points' displacement
+            along the seat's normal (m; negative = compressed), then the
+            muscle DoFs' Cardan angles (rad)."""
+            x = self._state_port.Eval(context)
+            parts, Jn, touching = [], None, None
+            if self._geometry is not None:
+                g = self._geometry
+                ctx = self._scratch.set_state(x)
+                J, _, _, pos_n, _, _, _ = g.kinematics(self._scratch.plant, ctx, x[self._nq:])
+                Jn = g.N_grouped @ J
+                parts.append(pos_n)
+                touching = in_contact(g.face, pos_n)
+            if len(self._muscle):
+                parts.append(x[self._layout.rot_q][self._muscle])
+            return np.concatenate(parts), Jn, touching
+
+        def _rms(self, context):
+            n = self._elements.n
+            stats = context.get_discrete_state(self._stats).CopyToVector()
+            prm = context.get_numeric_parameter(self._param).CopyToVector()
+            fixed = prm[:n]
+            running = stationary_rms(stats[n:])
+            return np.where(fixed >= 0, fixed, running), stats[:n], prm[n]
+
+        def _loss(self, context):
+            rms, mean, _ = self._rms(context)
+            return equivalent_loss(self._elements, rms), mean
+
+        def _spring(self, context):
+            """(stiffness about the running mean per element, the means)."""
+            rms, mean, active = self._rms(context)
+            return active * element_spring(self._elements, rms), mean
+
+        def _calc_force(self, context, output):
+            d, Jn, touching = self._deformation(context)
+            k, mean = self._spring(context)
+            f_el = -k * (d - mean)
+            force = np.zeros(self._nv, dtype=f_el.dtype)
+            nt = self._n_tissue
+            if nt:  # (Jn's rows and the forces in point order)
+                force = force + Jn.T @ (f_el[:nt] * touching)
+            if len(self._muscle):
+                tau = np.zeros(self._layout.num_rotational, dtype=f_el.dtype)
+                tau[self._muscle] = f_el[nt:]
+                q_rot = self._state_port.Eval(context)[self._layout.rot_q]
+                force[self._layout.rot_v] += cardan_to_generalized(self._ball, q_rot, tau)
+            output.SetFromVector(force)
+
+        def _tissue_forces(self, context):
+            """The tissue elements' normal force on the body (point order)."""
+            d, _, touching = self._deformation(context)
+            k, mean = self._spring(context)
+            nt = self._n_tissue
+            return -k[:nt] * (d[:nt] - mean[:nt]) * touching
+
+        def _calc_seat_forces(self, context, output):
+            if not self._n_tissue:
+                output.SetFromVector(np.zeros(3 * len(SEAT_PART_NAMES)))
+                return
+            g = self._geometry
+            output.SetFromVector(g.sum_parts @ (g.N.T @ self._tissue_forces(context)))
+
+        def _calc_deformation(self, context, output):
+            output.SetFromVector(self._deformation(context)[0])
+
+        def _calc_rms(self, context, output):
+            output.SetFromVector(self._rms(context)[0])
+
+        def _calc_loss(self, context, output):
+            output.SetFromVector(self._loss(context)[0])
+
+        def _update(self, context, discrete_state):
+            n = self._elements.n
+            d = self._deformation(context)[0]
+            stats = context.get_discrete_state(self._stats).CopyToVector()
+            mean, var = stats[:n], stats[n:]
+            e = d - mean
+            a = self._alpha
+            discrete_state.get_mutable_vector(self._stats).SetFromVector(
+                np.concatenate([mean + a * e, var + a * (e * e - var)]))
+
+    return Impl
+
+
+BodySoftening = BodySoftening_[None]
+
+
+def softening_initial_state(elements: ElementSet, deformation) -> np.ndarray:
+    """The system's discrete state at rest at `deformation` (per element):
+    the means there, no variance."""
+    return np.concatenate([np.asarray(deformation, float), np.zeros(elements.n)])
+
+
+__all__ = ["BodySoftening", "BodySoftening_", "softening_initial_state"]

@@ -1,0 +1,156 @@
+"""The body's softening with vibration magnitude (`ehm_drake.model.softening`,
+`ehm_drake.systems.softening`, `ehm_drake.analysis.equivalent`): the law,
+nothing at rest, a frozen element is a softer spring, the equivalent-linear
+iteration, and the nonlinear simulation against it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ehm_drake.analysis.equivalent import SeatSpectrum, equivalent_linear
+from ehm_drake.analysis.linear import default_frequencies, linearize
+from ehm_drake.diagram import build_diagram
+from ehm_drake.model.softening import (
+    equivalent_loss,
+    loss_fraction,
+    tissue_movement,
+)
+from ehm_drake.params import ParameterError, load_params, params_from_dict
+from ehm_drake.simulation import static_equilibrium
+from ehm_drake.validation.run import peak_frequency
+
+pytestmark = pytest.mark.xdist_group("softening")
+
+
+def _am_peak(lin) -> float:
+    f = default_frequencies(1200)
+    return peak_frequency(f, lin.apparent_mass(f, "z")["z"][1])
+
+
+def test_loss_law():
+    # Half the maximum loss at the critical amplitude, none at rest, r at most.
+    assert loss_fraction(0.0, 1e-4, 0.8) == 0.0
+    assert loss_fraction(1e-4, 1e-4, 0.8) == pytest.approx(0.4)
+    assert loss_fraction(1.0, 1e-4, 0.8) == pytest.approx(0.8, rel=1e-3)
+    s = np.logspace(-6, -2, 30)
+    assert np.all(np.diff(loss_fraction(s, 1e-4, 0.8)) > 0)
+
+
+def test_tissue_in_series_with_a_seat():
+    # The tissue's own movement solves s_t = s_d k_s / (k_s + k_t(s_t)) and
+    # the pair's stiffness is tissue and seat in series.
+    k_t0, k_s, r, sc = 2.1e5, 7.0e4, 0.88, 1e-4
+    c = np.array([1 / k_s])
+    for s_d in (1e-5, 1e-4, 1e-3, 5e-3):
+        s_t = tissue_movement(np.array([s_d]), np.array([k_t0]), c, np.array([sc]),
+                              np.array([r]), iterations=60)
+        k_t = k_t0 * (1 - loss_fraction(s_t, sc, r))
+        np.testing.assert_allclose(s_t, s_d * k_s / (k_s + k_t), rtol=1e-9)
+    # Four iterations (the law's) are within 1% of the fixed point.
+    s4 = tissue_movement(np.array([1e-3]), np.array([k_t0]), c, np.array([sc]), np.array([r]))
+    s60 = tissue_movement(np.array([1e-3]), np.array([k_t0]), c, np.array([sc]),
+                          np.array([r]), iterations=60)
+    np.testing.assert_allclose(s4, s60, rtol=1e-2)
+
+
+def test_rigid_seat_tissue_is_the_pair():
+    from ehm_drake.model.softening import ElementSet
+
+    el = ElementSet(("tissue",), ("buttocks",), np.array([2e5]), np.array([2e5]),
+                    np.array([0.5]), np.array([1e-4]), np.array([2.0]))
+    # On a rigid seat the tissue moves with the pair: loss = k0 r g(s).
+    assert equivalent_loss(el, np.array([1e-4]))[0] == pytest.approx(2e5 * 0.25)
+    assert abs(equivalent_loss(el, np.array([0.0]))[0]) < 1e-6
+
+
+def test_tissue_stiffness_below_the_pair_is_refused():
+    with pytest.raises(ParameterError, match="softening.tissue.pelvis_pan_stiffness"):
+        params_from_dict({"softening": {"tissue": {"pelvis_pan_stiffness": 1000.0}}})
+    with pytest.raises(ParameterError, match="softening.tissue.max_loss"):
+        params_from_dict({"softening": {"tissue": {"max_loss": 1.2}}})
+    with pytest.raises(ParameterError, match="critical_rms_m"):
+        params_from_dict({"softening": {"tissue": {"critical_rms_m": 0.0}}})
+
+
+@pytest.fixture(scope="module")
+def default_at_rest():
+    model = build_diagram(load_params(), guard=False)
+    ctx, _ = static_equilibrium(model)
+    return model, ctx
+
+
+def test_nothing_at_rest(default_at_rest):
+    # At rest the softening adds no force and, above its memory's corner
+    # (0.08 Hz), the linearization is the linear model with the contacts'
+    # stiffness at rest: the model without the softening system, within the
+    # few percent its deeper static sink changes (the seat is adjusted to it).
+    model, ctx = default_at_rest
+    soft = model.systems["body_softening"]
+    sctx = soft.GetMyContextFromRoot(ctx)
+    assert np.max(np.abs(soft.GetOutputPort("generalized_force").Eval(sctx))) < 1e-12
+    assert np.all(np.abs(soft.GetOutputPort("stiffness_loss").Eval(sctx)) < 1e-3)  # N/m
+    p = load_params()
+    p.softening.tissue.enabled = False
+    plain = linearize(build_diagram(p, guard=False))
+    soft_lin = linearize(model, ctx)
+    f = default_frequencies()
+    f = f[f > 1.0]
+    T1, T2 = soft_lin.transmissibility_array(f, "z"), plain.transmissibility_array(f, "z")
+    rel = np.abs(T1 - T2) / np.max(np.abs(T2))
+    assert np.max(rel) < 0.05
+    assert _am_peak(soft_lin) == pytest.approx(_am_peak(plain), rel=0.03)
+
+
+def test_the_default_diagram_sums_the_laws_and_the_softening():
+    model = build_diagram(load_params(), guard=False, seat_forces=False)
+    adder = model.diagram.GetSubsystemByName("generalized_force_sum")
+    assert adder.num_input_ports() == 2
+    assert {"force_laws", "body_softening"} <= set(model.systems)
+
+
+def test_frozen_softening_is_a_softer_contact():
+    # On a rigid seat, a frozen softening element is the contact pair made
+    # softer by its loss: the apparent-mass peaks agree within 3%.
+    p = load_params("rigid_seat")
+    model = build_diagram(p, guard=False)
+    ctx, _ = static_equilibrium(model)
+    soft = model.systems["body_softening"]
+    el = soft.elements
+    s = np.full(el.n, 3e-4)
+    loss = equivalent_loss(el, s)
+    soft.set_rms(soft.GetMyMutableContextFromRoot(ctx), s)
+    frozen = _am_peak(linearize(model, ctx))
+    k = {n: el.k_rest[i] - loss[i] for i, n in enumerate(el.names)}
+    softer = params_from_dict({
+        "seat": {"rigid": False, "backrest": False},
+        "contact": {"pelvis_pan": {"stiffness": k["buttocks"], "damping": 2200.0},
+                    "thighs_pan": {"stiffness": k["thigh_l"], "damping": 860.0}},
+        "softening": {"tissue": {"enabled": False}}})
+    linear = _am_peak(linearize(build_diagram(softer, guard=False)))
+    at_rest = _am_peak(linearize(build_diagram(p, guard=False)))
+    assert frozen < 0.85 * at_rest  # it does soften
+    assert frozen == pytest.approx(linear, rel=0.03)
+
+
+def test_equivalent_linear_softens_with_level():
+    # The equivalent-linear resonance falls with the level on every seat; the
+    # paper's linear model's does not move.
+    for config, drop in (("rigid_seat", 0.75), ("car_seat", 0.9)):
+        model = build_diagram(load_params(config), guard=False)
+        ctx, _ = static_equilibrium(model)
+        lo = equivalent_linear(model, SeatSpectrum.flat("z", 0.25, (0.5, 20.0)), ctx)
+        hi = equivalent_linear(model, SeatSpectrum.flat("z", 2.0, (0.5, 20.0)), ctx)
+        assert np.all(hi.movement_rms > 4 * lo.movement_rms)
+        assert _am_peak(hi.linear) < drop * _am_peak(lo.linear), config
+    model = build_diagram(load_params("paper_linear"), guard=False)
+    lo = equivalent_linear(model, SeatSpectrum.flat("z", 0.25))
+    hi = equivalent_linear(model, SeatSpectrum.flat("z", 2.0))
+    assert lo.iterations == 1 and _am_peak(hi.linear) == pytest.approx(_am_peak(lo.linear))
+
+
+def test_spectrum_rms():
+    assert SeatSpectrum.flat("z", 0.7, (0.5, 20.0)).rms[2] == pytest.approx(0.7, rel=1e-9)
+    assert SeatSpectrum.sine("x", 3.0, 0.4).rms[0] == pytest.approx(0.4)
+    with pytest.raises(ValueError):
+        SeatSpectrum.flat("z", -1.0)
