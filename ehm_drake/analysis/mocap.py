@@ -9,14 +9,15 @@ reference position ``p_LoQ_L`` is then its position in C, and its position at fr
 reference positions to the visible markers (Kabsch / Soederkvist & Wedin: the SVD of the
 cross-covariance, det-corrected), with its RMS residual as the quality figure.
 
-The reference pose of a cluster is its median pose over the record (each marker's median
-position, refined by averaging the markers brought back through their fitted poses: a rigid
-template).  A cluster is tracked in every frame with at least 3 of its markers visible; a
-frame with fewer is a gap, filled (cubic spline of the position and the rotation vector)
-when it is at most ``max_gap_s`` long, an error otherwise.  Frames at the start or end where
-a cluster is not tracked are cut off (a warning says how many).  A residual above
-``max_residual_m`` is an error naming the frames and the markers off the most (a marker
-swap, a mislabelled or a loose marker).
+The reference pose of a cluster is its mean pose over the record (the reference posture,
+in which the map's origin offsets are given); its shape is that of a frame of typical shape
+(marker distances nearest their medians over the record), refined by averaging the markers
+brought back through their fitted poses (a rigid template).  A cluster is tracked in every frame
+with at least 3 of its markers visible; a frame with fewer is a gap, filled (cubic spline of
+the position and the rotation vector) when it is at most ``max_gap_s`` long, an error
+otherwise.  Frames at the start or end where a cluster is not tracked are cut off (a warning
+says how many).  A residual above ``max_residual_m`` is an error naming the frames and what
+is wrong: two markers whose exchanged labels fit (a swap), else the marker off the most.
 
 The channels are those of the simulation (`ehm_drake.systems.outputs.BodyChannels`): a
 segment's tracked point M (marker map ``origin``) relative to the seat, on the seat's axes,
@@ -129,6 +130,57 @@ class ClusterTrack:
         return np.isfinite(self.rms)
 
 
+def _culprit(markers, p_ref, q, visible, limit) -> str:
+    """What makes a cluster's fit bad in frames `q` (F, n, 3): two markers whose labels,
+    exchanged, fit within `limit`; else the marker whose leaving out helps the most."""
+    q, visible = q[:200], visible[:200]
+
+    def median_rms(qq, vis):
+        return float(np.nanmedian(rigid_fit(p_ref, qq, vis)[2]))
+
+    n = len(markers)
+    pairs = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            k = np.arange(n)
+            k[[i, j]] = k[[j, i]]
+            R, _, rms = rigid_fit(p_ref, q[:, k], visible[:, k])
+            # A symmetric cluster fits another exchange turned over: of those that fit,
+            # the one that keeps the cluster nearest its reference orientation.
+            turn = np.nanmedian(np.arccos(np.clip((np.trace(R, axis1=1, axis2=2) - 1) / 2,
+                                                  -1, 1)))
+            pairs.append((float(np.nanmedian(rms)) > limit, turn, float(np.nanmedian(rms)),
+                          i, j))
+    over, _, r, i, j = min(pairs)
+    if not over:
+        return (f"markers {markers[i]} and {markers[j]} swapped (their labels exchanged fit "
+                f"within {1e3 * r:.2g} mm); fix the labels")
+    if n > 3:
+        alone = []
+        for i in range(n):
+            vis = visible.copy()
+            vis[:, i] = False
+            alone.append((median_rms(q, vis), i))
+        r, i = min(alone)
+        return (f"marker {markers[i]} off the most (without it {1e3 * r:.2g} mm): a loose, "
+                "mislabelled or swapped marker")
+    return "a loose, mislabelled or swapped marker"
+
+
+def _typical_shape(q: np.ndarray, visible: np.ndarray) -> np.ndarray:
+    """The cluster's markers in a frame of typical shape: of (up to 400) frames with every
+    marker visible, the one whose marker distances are nearest their medians (distances
+    do not depend on the pose, and a swap or a loose marker in fewer than half of the
+    frames does not move a median); each marker's median position if no frame has all."""
+    full = np.flatnonzero(visible.all(axis=1))
+    if not full.size:
+        return np.nanmedian(np.where(visible[:, :, None], q, np.nan), axis=0)
+    pick = full[np.linspace(0, full.size - 1, min(400, full.size)).astype(int)]
+    i, j = np.triu_indices(q.shape[1], 1)
+    dist = np.linalg.norm(q[pick][:, i] - q[pick][:, j], axis=2)
+    return q[pick[np.argmin(np.abs(dist - np.median(dist, axis=0)).sum(axis=1))]].copy()
+
+
 def track_cluster(name: str, markers: tuple[str, ...], q: np.ndarray, max_residual_m: float,
                   where: str = "", iterations: int = 3) -> ClusterTrack:
     """Reference positions and per-frame poses of one rigid cluster (see the module
@@ -142,7 +194,7 @@ def track_cluster(name: str, markers: tuple[str, ...], q: np.ndarray, max_residu
     if not (visible.sum(axis=1) >= 3).any():
         raise DataFormatError(f"{where}cluster '{name}': fewer than 3 of its markers visible "
                               "in every frame")
-    p_ref = np.nanmedian(np.where(visible[:, :, None], q, np.nan), axis=0)
+    p_ref = _typical_shape(q, visible)
     extent = float(np.max(np.linalg.norm(p_ref[:, None] - p_ref[None], axis=2)))
     lo, hi = CLUSTER_EXTENT_M
     if not lo <= extent <= hi:
@@ -163,18 +215,24 @@ def track_cluster(name: str, markers: tuple[str, ...], q: np.ndarray, max_residu
         n_vis = vis.sum(axis=0)
         mean = np.where(vis[:, :, None], back, 0.0).sum(axis=0) / np.maximum(n_vis, 1)[:, None]
         p_ref = np.where((n_vis > 0)[:, None], mean, p_ref)
+    # The template placed at the cluster's mean pose over the record (the chordal mean of
+    # the rotations, projected back onto SO(3)): the reference posture.
+    R, p, rms = rigid_fit(p_ref, q, visible)
+    good = np.isfinite(rms) & (rms <= max_residual_m)
+    if good.any():
+        U, _, Vt = np.linalg.svd(R[good].mean(axis=0))
+        R_mean = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+        p_ref = p_ref @ R_mean.T + p[good].mean(axis=0)
     R, p, rms = rigid_fit(p_ref, q, visible)
     bad = np.isfinite(rms) & (rms > max_residual_m)
     if bad.any():
-        err = np.einsum("fij,nj->fni", R[bad], p_ref) + p[bad][:, None] - q[bad]
-        dist = np.nanmean(np.where(visible[bad], np.linalg.norm(err, axis=2), np.nan), axis=0)
-        worst = [markers[i] for i in np.argsort(-np.nan_to_num(dist))[:2]]
         runs = spans(bad)
         raise DataFormatError(
             f"{where}cluster '{name}': fit residual up to {1e3 * np.nanmax(rms[bad]):.3g} mm "
             f"> max_residual_m {1e3 * max_residual_m:g} mm in frames {_frames(runs)} "
-            f"({int(bad.sum())} frames), markers {', '.join(worst)} off the most: a marker "
-            "swap, a mislabelled or a loose marker")
+            f"({int(bad.sum())} frames): "
+            + _culprit(markers, p_ref, q[runs[0][0]:runs[0][1] + 1],
+                       visible[runs[0][0]:runs[0][1] + 1], max_residual_m))
     return ClusterTrack(name, markers, p_ref, R, p, rms, visible)
 
 
@@ -235,8 +293,9 @@ def _marker_columns(session: C3DSession, mmap: MarkerMap, where: str) -> dict[st
     missing = [m for m in needed if m not in labels]
     if missing:
         hints = []
+        spare = [x for x in labels if x not in needed]  # a misnamed marker is among these
         for m in missing:
-            close = difflib.get_close_matches(m, labels, n=1, cutoff=0.6)
+            close = difflib.get_close_matches(m, spare, n=1, cutoff=0.6)
             hints.append(f"'{m}' (cluster {needed[m]}" + (f"; the file has '{close[0]}'"
                                                           if close else "") + ")")
         raise DataFormatError(f"{where}marker(s) {', '.join(hints)} not in the file "

@@ -2,10 +2,11 @@
 
 `synth --c3d` writes each test's record the way the lab of
 ``ehm_drake/data/marker_map_example.yaml`` would record it: rigid clusters of 4 markers on
-the seat pan, pelvis, trunk, head and thighs, in a lab frame turned 90 deg about z from the
-seat's axes, in mm; the seat accelerometer (3 axes, 0.0102 V per m/s^2) as analog channels
-at the marker rate.  The markers carry motion-capture noise and dropouts, so reading the
-sessions back (`ehm_drake.analysis.mocap`) exercises the whole lab path:
+the pelvis, trunk, head and thighs and of 6 on the seat (pan and backrest), in a lab frame
+turned 90 deg about z from the seat's axes, in mm; the seat accelerometer (3 axes, 0.0102 V
+per m/s^2) as analog channels at the marker rate.  The markers carry motion-capture noise
+and dropouts, so reading the sessions back (`ehm_drake.analysis.mocap`) exercises the whole
+lab path:
 
 * noise: white, `MARKER_NOISE_M` RMS per coordinate and sample (optical systems: 0.05-0.2 mm);
 * dropouts: each marker occluded over `MARKER_DROPOUT` of the frames, in bursts of 1-6
@@ -16,8 +17,9 @@ A body marker is placed rigidly on the segment: from the channels of the test (t
 segment's tracked point M and its rotation, relative to the reference pose, on the seat
 axes), marker k is at ``p_M_ref + dp(t) + R(t) o_k``, where ``o_k`` is its offset from M in
 the reference pose and ``R(t)`` the channels' roll-pitch-yaw; the seat markers follow the
-seat's displacement (the seat acceleration integrated twice).  Read back without noise, the
-channels are recovered to the C3D's float32 precision (tests/test_c3d.py).
+seat's displacement (the seat acceleration integrated twice, with the drift of the
+record's absolute translations, so the body stays on the seat).  Read back without noise
+or dropouts, the channels are recovered to the C3D's float32 precision (tests/test_c3d.py).
 """
 
 from __future__ import annotations
@@ -43,21 +45,26 @@ p_LoSo_L = np.array([1.5, 2.0, 0.45])
 #: Segment points M in the reference pose (seat axes, m; where a seated adult's are).
 _M = {"pelvis": (0.12, 0.0, 0.12), "trunk": (0.0, 0.0, 0.45), "head": (0.08, 0.0, 0.80),
       "knee_l": (0.45, 0.10, 0.10), "knee_r": (0.45, -0.10, 0.10)}
-#: Marker offsets from M (seat axes, m), consistent with the example map's origins.
+#: Marker offsets from M (seat axes, m), consistent with the example map's origins; each
+#: cluster asymmetric (a symmetric one fits a swap of its markers turned over).
 _OFFSETS = {
     "pelvis": {"LASI": (0.10, 0.12, 0.05), "RASI": (0.10, -0.12, 0.05),
                "LILC": (0.0, 0.15, 0.10), "RILC": (0.0, -0.15, 0.10)},
     "trunk": {"STRN": (0.18, 0.0, -0.05), "CLAV": (0.16, 0.0, 0.12),
               "LSHO": (0.02, 0.18, 0.15), "RSHO": (0.02, -0.18, 0.15)},
     "head": {"LFHD": (0.08, 0.07, 0.05), "RFHD": (0.08, -0.07, 0.05),
-             "LBHD": (-0.08, 0.07, 0.06), "RBHD": (-0.08, -0.07, 0.06)},
+             "LBHD": (-0.08, 0.07, 0.06), "RBHD": (-0.06, -0.07, 0.07)},
     "knee_l": {"LKNE": (0.0, 0.05, 0.0), "LTH1": (-0.12, 0.08, 0.06),
                "LTH2": (-0.22, 0.08, -0.02), "LTH3": (-0.17, 0.03, 0.10)},
     "knee_r": {"RKNE": (0.0, -0.05, 0.0), "RTH1": (-0.12, -0.08, 0.06),
                "RTH2": (-0.22, -0.08, -0.02), "RTH3": (-0.17, -0.03, 0.10)},
 }
+#: The seat's markers (seat axes, m): the pan's corners and the backrest's top (spread in
+#: height, they resolve the seat's pitch and roll: its rotation noise, times the lever arm
+#: up to the head, adds to the segments' translations).
 _SEAT = {"SEAT_FL": (0.45, 0.25, 0.0), "SEAT_FR": (0.45, -0.25, 0.0),
-         "SEAT_BL": (-0.05, 0.25, 0.0), "SEAT_BR": (-0.05, -0.25, 0.0)}
+         "SEAT_BL": (-0.05, 0.25, 0.0), "SEAT_BR": (-0.05, -0.25, 0.0),
+         "BACK_L": (-0.12, 0.22, 0.75), "BACK_R": (-0.12, -0.22, 0.75)}
 
 
 def _rotations(rpy: np.ndarray) -> np.ndarray:
@@ -78,6 +85,18 @@ def _displacement(acc: np.ndarray, fs: float, f_lo: float = 0.05) -> np.ndarray:
     A = np.fft.rfft(acc - acc.mean(axis=0), axis=0)
     w = 2 * np.pi * np.where(f > f_lo, f, np.inf)
     return np.fft.irfft(-A / w[:, None] ** 2, n, axis=0)
+
+
+def _seat_path(ts: TimeSeriesData) -> np.ndarray:
+    """(F, 3) the seat's displacement in the lab: its acceleration integrated twice, plus
+    the straight-line drift of the record's absolute translations (the simulation's seat
+    displacement drifts with the velocity it has when the record starts), so the body
+    stays on the seat."""
+    d = _displacement(ts.seat_acc, ts.fs)
+    pelvis = np.column_stack([ts.channels[f"pelvis_{a}"] for a in "xyz"])
+    A = np.column_stack([np.ones(ts.n_samples), ts.t - ts.t[0]])
+    coef, *_ = np.linalg.lstsq(A, pelvis - d, rcond=None)
+    return d + A @ coef
 
 
 def _bursts(rng, n: int, fraction: float, longest: int) -> np.ndarray:
@@ -103,7 +122,7 @@ def virtual_session(ts: TimeSeriesData, seat_acc: np.ndarray, seed: int,
     rng = np.random.default_rng(np.random.SeedSequence([seed, 4]))
     n = ts.n_samples
     labels, tracks = [], []
-    d_S = _displacement(ts.seat_acc, ts.fs)
+    d_S = _seat_path(ts)
     for name, o in _SEAT.items():
         labels.append(name)
         tracks.append(np.asarray(o) + d_S)
