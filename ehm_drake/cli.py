@@ -208,12 +208,23 @@ def _print_summary(summary: dict) -> None:
 # ---------------------------------------------------------------------------
 
 
+def _is_c3d(path: str) -> bool:
+    p = Path(path)
+    return p.suffix.lower() == ".c3d" or (p.is_dir() and any(
+        q.suffix.lower() == ".c3d" for q in p.iterdir()))
+
+
 def cmd_transmissibility(args) -> int:
     from .analysis.figures import plot_cases
     from .analysis.formats import check_units, read_data_dir
     from .analysis.transmissibility import transmissibility
 
-    frf, ts = read_data_dir(args.data)
+    if args.markers or any(_is_c3d(d) for d in args.data):
+        return _transmissibility_c3d(args)
+    if len(args.data) > 1:
+        raise UsageError("give one simulation or lab folder (several inputs are C3D "
+                         "sessions, with --markers)")
+    frf, ts = read_data_dir(args.data[0])
     out = prepare_output_dir(args.out, args.force)
     if ts is not None:
         frf = transmissibility(ts)
@@ -227,6 +238,40 @@ def cmd_transmissibility(args) -> int:
     print(f"transmissibility from {source}: {len(frf.channels())} channels, "
           f"{len(np.unique(frf.freq_hz))} frequencies -> {out / 'frf.csv'}, "
           + ", ".join(p.name for p in figs))
+    return 0
+
+
+def _transmissibility_c3d(args) -> int:
+    """`transmissibility SESSION.c3d... --markers MAP.yaml`: a lab folder."""
+    from .analysis.figures import plot_cases
+    from .analysis.formats import check_units
+    from .analysis.lab_c3d import REPORT_FILENAME, c3d_lab_folder
+
+    if not args.markers:
+        raise UsageError("C3D sessions need --markers MAP.yaml, the lab's marker map (example: "
+                         "ehm_drake/data/marker_map_example.yaml)")
+    not_c3d = [d for d in args.data if not _is_c3d(d)]
+    if not_c3d:
+        raise UsageError(f"--markers reads C3D sessions; {not_c3d[0]} is not a .c3d file or "
+                         "a folder of them")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise UsageError(f"--out {args.out} exists and is not a folder")
+    lab = c3d_lab_folder(args.data, args.markers, args.out, args.force,
+                         progress=not args.quiet)
+    for w in lab.warnings + check_units(lab.frf):
+        print(f"warning: {w}", file=sys.stderr)
+    figs = plot_cases({"estimate": lab.frf}, lab.out, measured=None)
+    for t, r in zip(lab.tests, lab.reports, strict=True):
+        worst = max(r["clusters"].items(), key=lambda kv: kv[1]["residual_max_mm"])
+        filled = sum(c["frames_filled"] for c in r["clusters"].values())
+        print(f"{t['c3d']}: {t['direction']} @ {t['level_rms']:g} m/s^2, {t['duration_s']:.1f} "
+              f"s at {r['point_rate_hz']:g} Hz; cluster residual up to "
+              f"{worst[1]['residual_max_mm']:.2f} mm ({worst[0]}); {filled} cluster-frames "
+              "filled")
+    print(f"-> {lab.out}: frf.csv ({len(lab.frf.channels())} channels), tests.json, "
+          f"{REPORT_FILENAME}, " + ", ".join(sorted({str(Path(t['timeseries']).parent) + '/'
+                                                    for t in lab.tests}))
+          + ", " + ", ".join(p.name for p in figs))
     return 0
 
 
@@ -470,10 +515,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_fit)
 
     p = sub.add_parser("transmissibility", help="estimate frf.csv and figures from a "
-                       "simulation or lab data folder (H1, 0-12 Hz band-pass)")
-    p.add_argument("data", metavar="SIM_OR_DATA_DIR")
+                       "simulation or lab data folder (H1, 0-12 Hz band-pass), or make a lab "
+                       "folder from motion-capture sessions (C3D files, with --markers)")
+    p.add_argument("data", metavar="SIM_OR_DATA_DIR|SESSION.c3d", nargs="+",
+                   help="a simulation or lab folder; or C3D sessions (files or folders of "
+                   "them), one test each")
+    p.add_argument("--markers", metavar="MAP.yaml", help="the lab's marker map for C3D "
+                   "sessions: clusters, seat accelerometer, segment points (see "
+                   "ehm_drake/data/marker_map_example.yaml)")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress on screen")
     p.set_defaults(func=cmd_transmissibility)
 
     p = sub.add_parser("comfort", help="ISO 2631-1 comfort metrics of the seat (and head)")

@@ -107,6 +107,9 @@ class BlindSpec:
     #: the model that makes the data on the model itself and the one
     #: `diagnose` fits, e.g. on the implicit design (``blind --design``).
     params: dict | None = None
+    #: The lab path: every data set is made as C3D sessions (`synth --c3d`)
+    #: and reduced to the lab folder diagnose reads (`analysis.lab_c3d`).
+    c3d: bool = False
 
     def model_params(self):
         """The run's `ModelParams`, or None for the defaults."""
@@ -388,6 +391,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     sfile = out / "blind_settings.json"
     if sfile.is_file():
         old = {"reality": MODEL_REALITY, "references": 0, "params": None, "contrasts": 0,
+               "c3d": False,
                **json.loads(sfile.read_text())}
         if {k: v for k, v in old.items() if k != "trials"} != \
                 {k: v for k, v in settings.items() if k != "trials"}:
@@ -428,7 +432,8 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         t1 = time.perf_counter()
         try:
             _synthesize_once(SynthSpec(tr["effects"], tr["synth_seed"], tuple(spec.levels),
-                                       spec.directions, spec.duration_s, reality=spec.reality),
+                                       spec.directions, spec.duration_s, reality=spec.reality,
+                                       c3d=spec.c3d),
                              data, key, spec.workers, params)
         except RealityError as e:
             # The reality's own simulation diverged on this subject and effect:
@@ -493,9 +498,9 @@ def _reference_group(spec: BlindSpec, out: Path, progress: bool, params=None) ->
         name = f"subject_{attempt:02d}"
         try:
             _synthesize_once(SynthSpec({}, seed, tuple(spec.levels), spec.directions,
-                                       spec.duration_s, reality=spec.reality),
+                                       spec.duration_s, reality=spec.reality, c3d=spec.c3d),
                              folder / name, out / "keys" / f"reference_{name}.json",
-                             spec.workers, params)
+                             spec.workers, params, out / "c3d_labs" / "reference" / name)
         except RealityError as e:
             prog.say(f"reference {name} (seed {seed}) skipped: {e}")
             continue
@@ -526,10 +531,11 @@ def _contrast_subjects(spec: BlindSpec, out: Path, progress: bool, params=None) 
             try:
                 _synthesize_once(SynthSpec({effect: CONTRAST_STRENGTH}, seed, tuple(spec.levels),
                                            spec.directions, spec.duration_s,
-                                           reality=spec.reality, session=1),
+                                           reality=spec.reality, session=1, c3d=spec.c3d),
                                  folder / "contrasts" / effect / name,
                                  out / "keys" / f"contrast_{effect}_{name}.json",
-                                 spec.workers, params)
+                                 spec.workers, params,
+                                 out / "c3d_labs" / "contrasts" / effect / name)
             except RealityError as e:
                 prog.say(f"contrast {effect} on {name} skipped: {e}")
                 continue
@@ -541,16 +547,31 @@ def _contrast_subjects(spec: BlindSpec, out: Path, progress: bool, params=None) 
 
 
 def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None,
-                     params=None) -> None:
+                     params=None, lab: Path | None = None) -> None:
     """`synthesize` into `data` and `key` unless a finished data folder is
-    there (a half-written one, from an interrupted run, is redone)."""
+    there (a half-written one, from an interrupted run, is redone).  With
+    `synth.c3d` the synthetic lab's own folder (its C3D sessions, marker
+    map and direct estimates) is `lab` (default: `data` + ``_lab``), and
+    `data` the lab folder made from its sessions alone: what diagnose is
+    given."""
+    import shutil
+
     if (data / "frf.csv").is_file():
         return
-    if data.exists() or key.exists():
-        import shutil
-        shutil.rmtree(data, ignore_errors=True)
-        key.unlink(missing_ok=True)
-    synthesize(synth, data, key, params=params, workers=workers, progress=False)
+    if not synth.c3d:
+        lab = data
+    elif lab is None:
+        lab = data.with_name(data.name + "_lab")
+    for folder in {data, lab}:
+        shutil.rmtree(folder, ignore_errors=True)
+    key.unlink(missing_ok=True)
+    synthesize(synth, lab, key, params=params, workers=workers, progress=False)
+    if synth.c3d:
+        from ..analysis.lab_c3d import c3d_lab_folder
+        from .synth_c3d import C3D_FOLDER, MARKER_MAP_FILENAME
+
+        c3d_lab_folder([lab / C3D_FOLDER], lab / C3D_FOLDER / MARKER_MAP_FILENAME, data,
+                       progress=False)
 
 
 def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
@@ -567,7 +588,8 @@ def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,
         try:
             _synthesize_once(SynthSpec({}, key["seed"], tuple(key["levels_rms"]),
                                        key["directions"], key["duration_s"],
-                                       reality=spec.reality), folder, twin_key, spec.workers)
+                                       reality=spec.reality, c3d=spec.c3d), folder, twin_key,
+                             spec.workers)
             det = twin_detectability(data, folder)
         except RealityError as e:
             # No twin (the reality diverged without the effect): the trial

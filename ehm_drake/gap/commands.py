@@ -81,6 +81,10 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--params", metavar="FILE", help="the model's parameters (default or a "
                    "fit's params.yaml); the subject scatter is applied to them")
     add_design_arguments(p)
+    p.add_argument("--c3d", action="store_true",
+                   help="also write each test as the C3D session of a motion-capture lab "
+                   "(marker clusters with noise and dropouts, the seat accelerometer as an "
+                   "analog channel) into DIR/c3d, with its marker map")
     p.add_argument("--out", required=True, metavar="DIR")
     p.add_argument("--key", required=True, metavar="KEYFILE")
     p.add_argument("--quiet", action="store_true")
@@ -116,6 +120,10 @@ def add_gap_arguments(sub) -> None:
     p.add_argument("--params", metavar="FILE", help="the model's parameters: the model that "
                    "makes the data (on --reality ehm) and the one diagnose fits")
     add_design_arguments(p)
+    p.add_argument("--c3d", action="store_true",
+                   help="the lab path: each data set is recorded as C3D sessions (synth "
+                   "--c3d) and diagnose reads the lab folder made from them (transmissibility "
+                   "--markers)")
     p.add_argument("--workers", type=int_at_least(1), default=None)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_blind)
@@ -196,7 +204,7 @@ def cmd_synth(args) -> int:
 
     spec = SynthSpec(parse_effects_arg(args.effect, args.strength), args.seed,
                      args.levels or DEFAULT_LEVELS, _directions(args.directions),
-                     args.duration or DEFAULT_DURATION_S, reality=args.reality)
+                     args.duration or DEFAULT_DURATION_S, reality=args.reality, c3d=args.c3d)
     res = synthesize(spec, args.out, args.key, _model_params(args, args.reality == MODEL_REALITY),
                      workers=args.workers, progress=not args.quiet)
     print(f"synth: {len(res.tests)} tests, {len(res.frf)} FRF rows -> {res.out_dir}; "
@@ -213,7 +221,7 @@ def cmd_blind(args) -> int:
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
                      workers=args.workers, reality=args.reality, references=args.references,
-                     contrasts=args.contrasts,
+                     contrasts=args.contrasts, c3d=args.c3d,
                      params=None if params is None else params.to_dict())
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):

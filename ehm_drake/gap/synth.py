@@ -31,6 +31,13 @@ direction and level; body motion by motion capture: white noise of 0.1 mm
 marker clusters); seat accelerometer noise 0.005 m/s^2 RMS; H1 estimation
 with 10 s Hann segments, 50% overlap (0.1 Hz resolution), exactly the
 `ehm-drake transmissibility` processing.
+
+With ``c3d`` (``synth --c3d``) each test is also written as the C3D session a
+motion-capture lab would record (`synth_c3d`: marker clusters with their own
+noise and dropouts, the same seat accelerometer record as an analog channel)
+into ``c3d/<direction>_<level>.c3d``, with the lab's marker map
+``c3d/marker_map.yaml``; ``ehm-drake transmissibility c3d/*.c3d --markers
+c3d/marker_map.yaml`` makes a lab folder of them.
 """
 
 from __future__ import annotations
@@ -89,6 +96,8 @@ class SynthSpec:
     #: A repeated sitting of the same subject (the same seed): 0 the first;
     #: each other number draws its own excitation and sensor noise.
     session: int = 0
+    #: Also write each test as a C3D session (`synth_c3d`) with the marker map.
+    c3d: bool = False
 
     def validate(self) -> None:
         if self.reality != MODEL_REALITY:
@@ -165,7 +174,7 @@ def _run_test(args):
     from ..signals import make_seat_signal
     from ..simulation import vibrate
 
-    params_dict, effects, settled, direction, level, duration, seed = args
+    params_dict, effects, settled, direction, level, duration, seed, c3d = args
     params = params_from_dict(params_dict)
     s = params.simulation
     t0 = time.perf_counter()
@@ -173,14 +182,17 @@ def _run_test(args):
                               s.time_step_s, s.settle_time_s, s.onset_time_s)
     result = vibrate(params, settled, signal, REFERENCE, effects=effects)
     steady = result.after(signal.steady_start)
-    frf, ts = _measure(steady.to_timeseries(), direction, level, seed)
-    return frf, ts, time.perf_counter() - t0, result.meta.get("real_time_factor", float("nan"))
+    frf, ts, session = _measure(steady.to_timeseries(), direction, level, seed, c3d)
+    return (frf, ts, time.perf_counter() - t0,
+            result.meta.get("real_time_factor", float("nan")), session)
 
 
-def _measure(ts: TimeSeriesData, direction: str, level: float, seed: int):
+def _measure(ts: TimeSeriesData, direction: str, level: float, seed: int, c3d: bool = False):
     """The lab's measurement chain on a noise-free record: sensor noise
-    (seeded by the test's seed), the test's nominal metadata, H1.  Returns
-    (FrfData, TimeSeriesData)."""
+    (seeded by the test's seed), the test's nominal metadata, H1; with
+    `c3d`, the test's C3D session too (its markers' own noise, the same
+    accelerometer record).  Returns (FrfData, TimeSeriesData, C3DSession or
+    None)."""
     rng = np.random.default_rng(np.random.SeedSequence([seed, 3]))
     channels = {}
     for name, x in ts.channels.items():
@@ -189,11 +201,17 @@ def _measure(ts: TimeSeriesData, direction: str, level: float, seed: int):
         channels[name] = x + sd * rng.standard_normal(len(x))
     seat = ts.seat_acc + NOISE_SEAT_MS2 * rng.standard_normal(ts.seat_acc.shape)
     # The level is the nominal RMS of the test (what a lab reports).
+    clean = ts
     ts = TimeSeriesData(ts.t - ts.t[0], seat, channels,
                         {"direction": direction, "level_rms": float(level)})
     nperseg = int(round(SEGMENT_S * ts.fs))
     frf = transmissibility(ts, directions=direction, nperseg=nperseg)
-    return frf, ts
+    session = None
+    if c3d:
+        from .synth_c3d import virtual_session
+
+        session = virtual_session(clean, seat, seed)
+    return frf, ts, session
 
 
 def _run_reality_test(args):
@@ -202,7 +220,7 @@ def _run_reality_test(args):
     `_run_test`."""
     from ..signals import make_seat_signal
 
-    name, prepared, direction, level, duration, seed = args
+    name, prepared, direction, level, duration, seed, c3d = args
     reality = get_reality(name)
     t0 = time.perf_counter()
     signal = make_seat_signal("random", direction, level, duration + REALITY_ONSET_S, seed,
@@ -217,8 +235,8 @@ def _run_reality_test(args):
     ts = TimeSeriesData(rec.t[::k] - rec.t[0], rec.seat_acc[::k],
                         {c: np.asarray(rec.channels[c])[::k] for c in CHANNEL_NAMES},
                         {"direction": direction, "level_rms": float(level)})
-    frf, ts = _measure(ts, direction, level, seed)
-    return frf, ts, time.perf_counter() - t0, rec.real_time_factor
+    frf, ts, session = _measure(ts, direction, level, seed, c3d)
+    return frf, ts, time.perf_counter() - t0, rec.real_time_factor, session
 
 
 @dataclass
@@ -266,7 +284,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
         effects = spec.effect_values()
         settled = settle(subject, REFERENCE, effects=effects)
         run = _run_test
-        jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd)
+        jobs = [(subject.to_dict(), effects, settled, d, lv, spec.duration_s, sd, spec.c3d)
                 for (d, lv), sd in zip(tests, seeds, strict=True)]
         truth = {
             "effects": {n: _truth(n, s, subject.simulation.time_step_s)
@@ -283,7 +301,7 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
         values = {n: reality.effect_values(n, s) for n, s in spec.effects.items() if s > 0}
         settled = reality.prepare(subject, values)
         run = _run_reality_test
-        jobs = [(spec.reality, settled, d, lv, spec.duration_s, sd)
+        jobs = [(spec.reality, settled, d, lv, spec.duration_s, sd, spec.c3d)
                 for (d, lv), sd in zip(tests, seeds, strict=True)]
         truth = {
             "reality": spec.reality,
@@ -311,6 +329,8 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
                           "timeseries": f"{sub.name}/timeseries.csv",
                           "duration_s": float(r[1].duration),
                           "n_averages": int(r[0].n_averages[0])})
+    if spec.c3d:
+        _write_sessions(out_dir, tests, [r[4] for r in results])
     write_test_list(out_dir, spec.directions, spec.levels, test_list,
                     {"estimator": "H1", "segment_s": SEGMENT_S, "overlap": 0.5,
                      "window": "hann", "band_hz": [0.1, 12.0],
@@ -331,6 +351,21 @@ def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = 
     wall = time.perf_counter() - t0
     prog.say(f"wrote {out_dir} ({len(frf)} FRF rows) and key {key_path} in {wall:.0f} s")
     return SynthResult(out_dir, key_path, frf, key, wall, test_list)
+
+
+def _write_sessions(out_dir: Path, tests: list, sessions: list) -> None:
+    """The tests' C3D sessions and the lab's marker map into out_dir/c3d."""
+    import shutil
+
+    from ..analysis.formats.c3d import write_c3d
+    from ..analysis.marker_map import EXAMPLE_MARKER_MAP
+    from .synth_c3d import C3D_FOLDER, MARKER_MAP_FILENAME
+
+    folder = out_dir / C3D_FOLDER
+    folder.mkdir()
+    shutil.copyfile(EXAMPLE_MARKER_MAP, folder / MARKER_MAP_FILENAME)
+    for (d, lv), session in zip(tests, sessions, strict=True):
+        write_c3d(folder / f"{d}_{level_label(lv)}.c3d", session)
 
 
 def parse_effects_arg(text: str, strength: float | None) -> dict:

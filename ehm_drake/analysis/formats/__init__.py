@@ -43,6 +43,11 @@ units, the CSV parsing shared by the readers), :mod:`.frf` (``frf.csv``, :func:`
 :mod:`.timeseries` (``timeseries.csv`` and its comment-line metadata), :mod:`.metadata`
 (``meta.json``, the test list ``tests.json`` and the metadata checks) and :mod:`.folder`
 (:func:`read_data_dir`).  The public names are re-exported here.
+
+Motion-capture sessions in C3D files (markers and analog channels, https://www.c3d.org) are
+read and written by :mod:`.c3d` (not re-exported: it imports ezc3d) and reduced to
+``timeseries.csv`` records by :mod:`ehm_drake.analysis.mocap` with a lab's marker map
+(:mod:`ehm_drake.analysis.marker_map`).
 """
 
 from .common import (
