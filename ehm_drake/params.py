@@ -427,7 +427,8 @@ def validate(params: ModelParams) -> ModelParams:
     # The tissue's own stiffness is the contact pair's on a rigid seat and
     # more on a compliant one (the seat in series); never less.
     tissue = params.softening.tissue
-    for pair in () if not tissue.enabled else ("pelvis_pan", "thighs_pan", "lower_back_pad", "upper_back_pad"):
+    pairs = ("pelvis_pan", "thighs_pan", "lower_back_pad", "upper_back_pad")
+    for pair in pairs if tissue.enabled else ():
         k_t = getattr(tissue, f"{pair}_stiffness")
         k_c = getattr(params.contact, pair).stiffness
         if k_t < k_c * (1.0 - 1e-12):

@@ -29,7 +29,7 @@ from ..signals import BAND_HZ
 #: Relative change of every element's RMS movement at which the iteration
 #: stops, and the most iterations.
 TOLERANCE = 2e-3
-MAX_ITERATIONS = 30
+MAX_ITERATIONS = 60
 
 
 class EquivalentLinearError(RuntimeError):
@@ -156,7 +156,7 @@ def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=
     from ..model.softening import equivalent_loss
 
     s = np.zeros(elements.n)
-    history = []
+    relax, last = 0.5, np.inf
     try:
         for it in range(1, max_iterations + 1):
             soft.set_rms(sctx, s)
@@ -166,14 +166,20 @@ def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=
                     f"the model is unstable at {spectrum.description} (iteration {it}, "
                     f"element RMS movement up to {np.max(s):.3g})")
             s_new = element_rms(lin, spectrum)
-            history.append(s_new)
-            change = np.max(np.abs(s_new - s) / np.maximum(s_new, 1e-12))
+            # (Relative to at least 1% of the critical amplitude: an element
+            # that barely moves, as the pelvis's normal under lateral
+            # excitation, has no loss to settle.)
+            change = np.max(np.abs(s_new - s) / np.maximum(s_new, 0.01 * elements.critical))
             if change < tolerance:
                 s = s_new
                 break
-            # Under-relaxed in the log (the map s -> s_new is decreasing in s's
-            # stiffness loss, so a full step can oscillate).
-            s = np.sqrt(np.maximum(s, 1e-12) * s_new) if it > 1 else s_new
+            # Under-relaxed in the log (the map s -> s_new falls as s grows: a
+            # full step can oscillate), more so while the change does not fall.
+            if change > 0.7 * last:
+                relax = max(0.5 * relax, 0.05)
+            last = change
+            s = (np.exp((1 - relax) * np.log(np.maximum(s, 1e-12)) + relax * np.log(s_new))
+                 if it > 1 else s_new)
         else:
             raise EquivalentLinearError(
                 f"the equivalent-linear iteration did not settle in {max_iterations} steps "

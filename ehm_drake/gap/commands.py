@@ -18,6 +18,17 @@ from ..realities import MODEL_REALITY
 from .effects import EFFECT_NAMES
 
 
+def _default_hidden(reality: str | None) -> tuple[str, ...]:
+    """The effects a blind run hides by default: every candidate the body
+    implements (an independent reality may implement a subset)."""
+    from ..realities import MODEL_REALITY, get_reality
+
+    if not reality or reality == MODEL_REALITY:
+        return EFFECT_NAMES
+    known = get_reality(reality).effect_names()
+    return tuple(n for n in EFFECT_NAMES if n in known)
+
+
 def _effect_list(text):
     names = tuple(t.strip() for t in text.split(",") if t.strip())
     bad = [n for n in names if n not in EFFECT_NAMES]
@@ -219,7 +230,8 @@ def cmd_blind(args) -> int:
     params = _model_params(args, True)
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
-                     args.hidden or EFFECT_NAMES, args.effects, args.p_none, args.p_two,
+                     args.hidden or _default_hidden(args.reality), args.effects, args.p_none,
+                     args.p_two,
                      workers=args.workers, reality=args.reality, references=args.references,
                      contrasts=args.contrasts, c3d=args.c3d,
                      params=None if params is None else params.to_dict())

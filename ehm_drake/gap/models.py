@@ -561,7 +561,7 @@ class Predictor:
                     self.sigmas[i] = st
                 new = statistics(i, t)
                 change = np.max(np.abs(new["normal"] - st["normal"])
-                                / np.maximum(new["normal"], 1e-12))
+                                / np.maximum(new["normal"], 0.01 * self._critical))
                 st = new
                 if change < SOFTENING_TOLERANCE:
                     break

@@ -111,6 +111,11 @@ class Reality:
         `strength` in [0, 1] of its plausible range (0 = off)."""
         raise NotImplementedError
 
+    def effect_names(self) -> tuple[str, ...]:
+        """The candidate effects this reality implements (the own family's
+        `ehm_drake.gap.effects.EFFECT_NAMES`, or a subset)."""
+        raise NotImplementedError
+
     def prepare(self, subject: dict[str, Any], effects: dict[str, dict[str, float]]) -> Any:
         """Whatever the tests of one subject share (e.g. the settled state),
         picklable.  `effects` maps effect names to `effect_values`."""

@@ -30,7 +30,14 @@ contact's long-range one, a muscle element minus what it has lost
 from __future__ import annotations
 
 import numpy as np
-from pydrake.systems.framework import BasicVector_, LeafSystem_
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import (
+    BasicVector_,
+    DiscreteStateIndex,
+    LeafSystem_,
+    NumericParameterIndex,
+    ValueProducer,
+)
 
 from ..model.plant import JointLayout
 from ..model.softening import ElementSet, element_spring, equivalent_loss, stationary_rms
@@ -69,6 +76,24 @@ def BodySoftening_(T):
                 BasicVector_[T](np.append(np.full(n, -1.0), 1.0)))
             self._stats = self.DeclareDiscreteState(2 * n)
             self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+            # The kinematics once per state (the force, the seat forces and the
+            # update all read them).
+            self._kin = self.DeclareCacheEntry(
+                "softening kinematics",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None, None)),
+                              calc=lambda context, value: value.set_value(
+                                  self._calc_deformation_kin(context))),
+                prerequisites_of_calc={self.input_port_ticket(self._state_port.get_index())})
+            # The springs once per step (they depend on the running variances
+            # and the parameters only).
+            self._springs = self.DeclareCacheEntry(
+                "softening springs",
+                ValueProducer(allocate=lambda: AbstractValue.Make((None, None)),
+                              calc=lambda context, value: value.set_value(
+                                  self._calc_spring(context))),
+                prerequisites_of_calc={
+                    self.discrete_state_ticket(DiscreteStateIndex(self._stats)),
+                    self.numeric_parameter_ticket(NumericParameterIndex(self._param))})
             self.DeclareVectorOutputPort("generalized_force", self._nv, self._calc_force)
             self.DeclareVectorOutputPort("deformation", n, self._calc_deformation)
             self.DeclareVectorOutputPort("seat_forces", 3 * len(SEAT_PART_NAMES),
@@ -116,6 +141,9 @@ def BodySoftening_(T):
             rows or None, in-contact flags): the tissue points' displacement
             along the seat's normal (m; negative = compressed), then the
             muscle DoFs' Cardan angles (rad)."""
+            return self._kin.Eval(context)
+
+        def _calc_deformation_kin(self, context):
             x = self._state_port.Eval(context)
             parts, Jn, touching = [], None, None
             if self._geometry is not None:
@@ -143,6 +171,9 @@ def BodySoftening_(T):
 
         def _spring(self, context):
             """(stiffness about the running mean per element, the means)."""
+            return self._springs.Eval(context)
+
+        def _calc_spring(self, context):
             rms, mean, active = self._rms(context)
             return active * element_spring(self._elements, rms), mean
 

@@ -42,6 +42,8 @@ class RunMeasures:
         return peak_frequency(self.freq_hz, self.apparent_mass, RESONANCE_BAND_HZ)
 
     def head_z_at(self, f_hz: float) -> float:
+        """Seat-to-head vertical transmissibility at `f_hz` (m/m; a sine
+        run has its one frequency)."""
         return float(np.interp(f_hz, self.freq_hz, self.head_z))
 
     def to_dict(self) -> dict:
@@ -108,9 +110,24 @@ def simulate_run(job) -> RunMeasures:
     result = vibrate(params, settled, signal).after(signal.steady_start)
     fs = result.sample_rate
     nper = int(round(SEGMENT_S * fs))
-    frf = transmissibility(result.to_timeseries())
-    f_h, gain, _, coh_h = frf.get(run.direction, "head", "z")
     static_mass = float(np.mean(result.pan_force()[:, 2])) / 9.81
+    if run.kind == "sine":
+        # One frequency: the complex amplitudes of the head's and the seat's
+        # vertical displacement at it, over whole periods.
+        from ..systems.outputs import CHANNEL_NAMES
+
+        f0 = run.frequency_hz
+        t = result.times - result.times[0]
+        n = int(round(np.floor(t[-1] * f0) * fs / f0))
+        basis = np.exp(-2j * np.pi * f0 * t[:n])
+        head_amp = basis @ result.channels[:n, CHANNEL_NAMES.index("head_z")]
+        seat_amp = basis @ result.seat_displacement[:n, 2]
+        f_h = np.array([f0])
+        gain, coh_h = np.array([abs(head_amp / seat_amp)]), np.array([1.0])
+        frf = None
+    else:
+        frf = transmissibility(result.to_timeseries())
+        f_h, gain, _, coh_h = frf.get(run.direction, "head", "z")
     if run.kind == "random":
         # The apparent mass on 0.1 Hz bins (10 s Hann segments, 50% overlap).
         from ..analysis.spectral import apparent_mass

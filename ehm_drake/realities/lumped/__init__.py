@@ -81,6 +81,9 @@ class LumpedReality(Reality):
                            for k in factors},
                 "body_mass_kg": float(make_plan(values).total_mass)}
 
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(par.EFFECT_RANGES)
+
     def effect_values(self, name: str, strength: float) -> dict[str, float]:
         if name not in par.EFFECT_RANGES:
             raise RealityError(f"unknown effect {name!r}; choose from "

@@ -77,6 +77,13 @@ SPECS: dict[str, tuple[list[tuple[str, float, float, bool]], dict[str, float]]] 
     "cocontraction": ([("c_per_ms2", 0.0, 1.2, False)], {"tau_s": 3.0}),
     "seat_cushion_dynamics": ([("stiffness", 3.0e6, 5.0e4, True)],
                               {"mass_kg": 3.5, "damping_ratio": 0.15}),
+    # The seat tissue's short-range stiffness (about its slow mean
+    # compression, `forces.Spine5Forces.contact`) saturating beyond 0.3 mm of
+    # dynamic compression: up to 60% of the tissue's stiffness is short-range
+    # (Loram, Maganaris & Lakie 2007, J Physiol 584:661-675: the calf's
+    # stiffness falls 81% from 0.03 to 7 deg).  A memoryless law about the
+    # slow mean, unlike the EHM model's running-RMS one.
+    "softening": ([("short_range_fraction", 0.0, 0.6, False)], {"range_mm": 0.3}),
 }
 
 EFFECT_NAMES = tuple(SPECS)

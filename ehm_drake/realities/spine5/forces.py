@@ -84,6 +84,10 @@ class Spine5Forces(LeafSystem):
         foam = ef.get("seat_foam_stiffening", {})
         self.gamma = np.where(self.is_foot, 0.0, foam.get("gamma_per_mm2", 0.0) * 1e6)
         self.foam_alpha = self.h / foam.get("tau_slow_s", 1.5)
+        soft = ef.get("softening", {})
+        self.soft_s = np.where(self.is_foot, 0.0, soft.get("short_range_fraction", 0.0))
+        self.soft_dc = soft.get("range_mm", 0.3) * 1e-3
+        self.softening = bool(np.any(self.soft_s > 0))
         self.iq_cushion = (plant.GetJointByName("cushion_z").position_start()
                            if "cushion" in segs else None)
         self.k_cushion = ef.get("seat_cushion_dynamics", {}).get("stiffness", 0.0)
@@ -254,6 +258,11 @@ class Spine5Forces(LeafSystem):
             g2 = self.gamma * dyn * dyn
             Fn = self.kn * (d + dyn * g2 / (1.0 + g2 / (FOAM_MAX_FACTOR - 1.0))) \
                 - self.cn * Qd[:, 0]
+            if self.softening:
+                # The short-range part of the tissue's stiffness saturates:
+                # tangent kn (1 - s tanh^2(dyn / dc)) about the slow mean.
+                dc = self.soft_dc
+                Fn = Fn - self.kn * self.soft_s * (dyn - dc * np.tanh(dyn / dc))
         Fn = np.where(inside, np.maximum(Fn, 0.0), 0.0)
         Pt = Q[:, 1:]
         fs = self.kt2 * (anchors - Pt)

@@ -107,6 +107,11 @@ class Spine5Reality(Reality):
     def effect_values(self, name: str, strength: float) -> dict[str, float]:
         return effect_values(name, strength)
 
+    def effect_names(self) -> tuple[str, ...]:
+        from .effects import EFFECT_NAMES
+
+        return EFFECT_NAMES
+
     # -------------------------------------------------------------- prepare
     def build(self, values: dict, effects: dict) -> Spine5Model:
         return Spine5Model(values, effects)
