@@ -477,7 +477,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="record the outputs every K time steps, at 1 / (K step) exactly "
                    "(default: the parameters' rate, 200 Hz, whose period must be a whole "
                    "number of steps; e.g. --design implicit --time-step 0.006 --output-every "
-                   "1: 166.7 Hz, about 15%% faster than 5 ms; README \"Two designs\")")
+                   "1: 166.7 Hz, about 15%% faster than 5 ms; docs/designs.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")

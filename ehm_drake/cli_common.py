@@ -73,7 +73,7 @@ def add_design_arguments(p: argparse.ArgumentParser) -> None:
                    "= the paper's spherical joints, feedback explicit, 1 ms step; implicit = "
                    "Cardan joint chains, stiff feedback in the implicit solve, a step chosen by "
                    "accuracy (5 ms; 5/3 ms for the high-stiffness variant), about "
-                   "3x faster (README \"Two designs\")")
+                   "3x faster (docs/designs.md)")
     p.add_argument("--time-step", type=positive_float("--time-step"), metavar="S",
                    help="simulation time step in seconds (default: the parameters', or the "
                    "design's own when --design changes it: reference 0.001, implicit the "

@@ -1,5 +1,7 @@
 """Assemble the seated-human Diagram.
 
+The signal flow::
+
     excitation --a--> force laws: seat inertial load --+
     plant --state-->              passive joints       |
                                   joint PID            +--> plant.applied_generalized_force
@@ -9,7 +11,7 @@
     plant --state--> body channels (+ seat displacement) --> "channels"
 
 On both designs one system, `ForceLaws` ("force_laws"), applies the five
-laws in one pass; `EhmDiagram.systems` holds its `LawView`s under the five
+laws in one pass; `EhmDiagram.systems` holds its `LawView` views under the five
 names (``joint_pid``, ``head_in_space``, ...).  `separate_force_systems`
 builds the same laws as one LeafSystem each (`PassiveJoints`, `JointPid`,
 `ShearRestraints`, `HeadInSpace`, `SeatInertialLoad`): the readable form,
@@ -372,7 +374,7 @@ def accurate_step(params: ModelParams, measures: BodyMeasures = REFERENCE,
     no stiff spring integrated implicitly, no contact damper clipped).  The
     default body gets 5 ms; the high-stiffness variant, whose lower-torso
     springs need 2.19 ms, gets 5/3 ms (at 5 ms its step error was 27% in
-    the worst bin; README "Two designs")."""
+    the worst bin; docs/designs.md)."""
     p = params.copy()
     p.simulation.design = "implicit"
     p.simulation.time_step_s = IMPLICIT_TIME_STEP_S

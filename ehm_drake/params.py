@@ -577,7 +577,7 @@ REFERENCE_TIME_STEP_S = 0.001
 
 #: Time step of the implicit design, chosen by accuracy: its linearized
 #: transmissibility is within 0.34% median, 4.3% worst bin of its converged
-#: step at 5 ms (README "Two designs", `tests/test_implicit_design.py`).  A
+#: step at 5 ms (docs/designs.md, `tests/test_implicit_design.py`).  A
 #: body or variant whose springs need less gets less from the command line
 #: (`ehm_drake.diagram.accurate_step`).
 IMPLICIT_TIME_STEP_S = 0.005

@@ -25,7 +25,7 @@ pytestmark = pytest.mark.xdist_group("gap_blind")
 #: effect, seat_foam_stiffening at 0.98 (a third trial would be the foam at 0.92).
 #: Vertical-only 30 s records show the seat foam clearly; the trunk effects (co-contraction,
 #: visceral mass, reflex delay) act mostly in fore-aft and lateral motion and need the full
-#: protocol of the README's blind run
+#: protocol of the full blind run (docs/history/2026-12-03-readme-log.md)
 #: (in this protocol, co-contraction at 0.81 and a 4 kg visceral mass were within the noise).
 #: Three candidates (linear and level-dependent, an interpolated and two exact families)
 #: keep it within the test budget; the full library is checked by `ehm-drake blind`.

@@ -76,7 +76,7 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     # the next subject reaches, and on the cube-root scale they would widen
     # the spread most (thresholds 2.5-5.6 times the true quantile on
     # simulated held-out gains): clipped.  Clipped at -MIN_GAIN instead
-    # (stop 44; a loss within the noise taken as the null's own spread), 4
+    # (a loss within the noise taken as the null's own spread), 4
     # instead of 10 of 68 measured no-effect `lumped` subjects had an effect
     # named (`bench/null_calibration.py`), but the fresh effect runs lost
     # hits: seeds 2046 + 2047, 30 of 51 found against 35.  Gains that are
@@ -113,7 +113,7 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
     Two conditions, both needed for a candidate to be named:
 
     1. its own bound (`null_threshold` on its null gains, Bonferroni over
-       the candidates): what the thresholds were until stop 55;
+       the candidates): the thresholds' first form;
     2. a full conformal test of the family (Vovk, Gammerman & Shafer 2005;
        Lei et al. 2018), which holds the family-wise level whatever the
        gains' distribution.  The K + 1 subjects -- the group's and this
@@ -137,7 +137,7 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
        test the more cautious.)
 
        The scale is the runner-up, not a parametric bound on the K + 1
-       values less the largest (stop 55's form): a candidate whose null
+       values less the largest (an earlier form): a candidate whose null
        has a heavy cluster (on `spine5`, backrest separation: 13 of 16
        subjects at 0, two at 436 and 1,005) then scores its outlier
        against the cluster (1,005 / 436), not against a bound that the

@@ -510,7 +510,7 @@ def group_size_caution(size: int) -> str | None:
     return (f"a reference group of {size} subjects: each candidate's threshold rests on "
             f"{size} leave-one-out values, which scatter widely from one group to the next; "
             f"at least {RECOMMENDED_SUBJECTS} subjects are recommended (the `lumped` "
-            f"reality's stored blind trials, stop 45: an effect named on 7 of 42 no-effect "
+            f"reality's stored blind trials: an effect named on 7 of 42 no-effect "
             f"subjects against their groups of 8, on 2 against groups of 16; hidden effects "
             f"found in 35 of 51 trials against 43)")
 
@@ -525,7 +525,7 @@ def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, li
     The candidates beyond their null come first, ordered by how far their
     evidence exceeds their own threshold; the others follow by evidence.
     Held-out gains of different candidates are not on one scale under the
-    null: on `lumped` seed 2046's group (thresholds as at stops 41-43)
+    null: on `lumped` seed 2046's group (with per-candidate bounds alone)
     `seat_cushion_dynamics` reaches a threshold of 318 on subjects without
     any effect, `reflex_delay` 68, and a reflex delay gaining 243 (3.6 times
     its bar) lost to the cushion's 369 (1.2 times) when the largest evidence

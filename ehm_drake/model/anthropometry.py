@@ -65,7 +65,7 @@ import numpy as np
 
 #: de Leva (1996) Table 4 (male) and Table 1 lengths.
 #: name: (length_mm, mass_percent, com_percent_from_proximal,
-#:        r_sagittal_percent, r_transverse_percent, r_longitudinal_percent)
+#: r_sagittal_percent, r_transverse_percent, r_longitudinal_percent).
 #: r_sagittal is about the antero-posterior axis, r_transverse about the
 #: medio-lateral axis, r_longitudinal about the segment's long axis.
 DE_LEVA_1996_MALE: dict[str, tuple[float, float, float, float, float, float]] = {

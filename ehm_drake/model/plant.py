@@ -16,7 +16,7 @@ first entry of their damping vector to all their axes (checked on Drake
 1.51: a ball joint given (100, 1, 1) damps all three velocities at 100), so
 a multi-DoF joint gets its smallest axis damping on every axis (implicit)
 and `PassiveJoints` applies the rest about the Cardan rates
-(`HumanPlant.damping_remainder`; README, "Two designs").  On the implicit
+(`HumanPlant.damping_remainder`; docs/designs.md).  On the implicit
 design every damper is split between SAP and an explicit force so that the
 step is second-order accurate (`ehm_drake.model.stepping`), and the shear
 restraints' linear part is a set of compliant distance constraints

@@ -46,7 +46,7 @@ CARDAN_AXES = {"ball": (2, 1, 0), "ball+prismatic": (2, 1, 0), "universal": (0, 
 GIMBAL_MASS_KG = 1e-4
 GIMBAL_INERTIA = 1e-8
 SEAT_SDF_NAME = "ehm_seat_erect_high_support.sdf"
-#: The package name under which `package://` URLs find the files in `sdf/`.
+#: The package name under which ``package://`` URLs find the files in ``sdf/``.
 PACKAGE_NAME = "ehm_drake"
 
 SKIN = "0.87 0.72 0.60 1"
@@ -86,8 +86,8 @@ def packaged_sdf(name: str) -> str:
     """The text of a packaged SDF file, read once per process.  Drake 1.51
     parses a model from its text in under 1 ms (the seat) to about 10 ms
     (the human), from its file or `package://` URL in 40-55 ms each time
-    whatever its size: about a quarter of a fit's model evaluation until
-    stop 57.  The files refer to no other file."""
+    whatever its size: about a quarter of a fit's model evaluation when
+    parsed from the files.  The files refer to no other file."""
     return (model_directory() / name).read_text()
 
 

@@ -76,11 +76,11 @@ def spec_field(default: Any = None, *, factory: Callable[[], Any] | None = None,
                missing: str | None = None, check: Callable[..., Any] | None = None):
     """A schema field.
 
-    expect : the allowed values in words, for the error (default: from the type).
-    ok : range check of a value of the right type.
-    missing : the key is required; the error text when it is absent.
-    check : ``check(name, value, where)`` replaces the type and range check
-        (for values that are checked the same way elsewhere, e.g. swept settings).
+    `expect`: the allowed values in words, for the error (default: from the
+    type).  `ok`: range check of a value of the right type.  `missing`: the key
+    is required; the error text when it is absent.  `check`: ``check(name,
+    value, where)`` replaces the type and range check (for values that are
+    checked the same way elsewhere, e.g. swept settings).
     """
     meta = {k: v for k, v in (("expect", expect), ("ok", ok), ("missing", missing),
                               ("check", check)) if v is not None}

@@ -4,7 +4,7 @@ is built from Drake's C++ primitives (`excitation.add_seat_excitation`).
 
 Conventions shared by the systems here:
 
-* The dynamic systems are `TemplateSystem`s instantiated for float and
+* The dynamic systems are template systems (`TemplateSystem`) instantiated for float and
   AutoDiffXd (`SCALARS`), so the diagram converts to AutoDiffXd for
   linearization.  Symbolic Expression is left out on purpose: with it, Drake
   probes every output symbolically at Build() to find feedthrough, which
@@ -38,7 +38,7 @@ def _module_of_frame(frame: int = 2):
     module of the frame `frame` levels up), from the frame's globals instead
     of `inspect.stack()`, which reads the source file of every frame on the
     stack: each instantiation of a `TemplateSystem` (for float at import,
-    for AutoDiffXd at a linearization) makes two `TemplateMethod`s that ask
+    for AutoDiffXd at a linearization) makes two `TemplateMethod` objects that ask
     for it, 25-60 ms each, 0.7 s of importing the systems."""
     f = sys._getframe(frame)
     module = sys.modules.get(f.f_globals.get("__name__"))

@@ -7,7 +7,7 @@ Built from Drake's C++ primitives, not a Python system: a
 give sample k = floor(t/h + 1e-6), the one the discrete plant uses
 (`SeatSignal.sample_index`; the hold's breaks sit at (k - 1e-6) h).  As a
 Python system its two outputs read every step cost about 12 us of a 5 ms
-step (stop 48).  The hold is a B-spline of order 1, whose control points
+step.  The hold is a B-spline of order 1, whose control points
 are the samples themselves: a `PiecewisePolynomial` zero-order hold gives
 the same values but keeps a polynomial object per sample and axis (120 MB
 for 65 s at 1 ms, against 13 MB)."""

@@ -19,13 +19,13 @@ The PID acts on the joint angles q (error against the reference posture)
 and the joint velocities v.  Its torques are Cardan torques, as the
 springs' are: on the implicit design's Cardan chains the generalized forces
 themselves; on the reference design's ball joints mapped by N(q)^T at the
-plant's own configuration.  (Until stop 40 they acted on the ball joints'
+plant's own configuration.  (In a first version they acted on the ball joints'
 angular-velocity coordinates: the same at the reference posture, but a
 joint holding a static torque -- the integral action under the body's
 weight -- got a stiffness ~10% off in yaw and roll, and the two designs
 differed by up to 4.6% in transmissibility; see docs/speed.md, "Two designs".)
 
-Both are `TemplateSystem`s (float, AutoDiffXd).
+Both are template systems (`TemplateSystem`; float, AutoDiffXd).
 """
 
 from __future__ import annotations

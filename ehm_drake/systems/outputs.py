@@ -239,7 +239,7 @@ class DivergenceGuard(LeafSystem):
     #: check is reported from the last completed state
     #: (`check_after_failure`); a posture lost (joint range, pelvis through
     #: the pan) is reported within 50 ms.  Checking every 10 ms cost ~3% of a
-    #: 5 ms step's time in a run (stop 49: 570-580 -> 555-564 us per step).
+    #: 5 ms step's time in a run (570-580 -> 555-564 us per step).
     PERIOD_S = 0.05
 
     def __init__(self, hp, period: float = PERIOD_S):
