@@ -36,4 +36,5 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     html = (tmp_path / "html" / "api.html").read_text()
     # The docstrings are there, not only the headings.
-    assert "static_equilibrium" in html and "Desai" in (tmp_path / "html" / "index.html").read_text()
+    index = (tmp_path / "html" / "index.html").read_text()
+    assert "static_equilibrium" in html and "Desai" in index
