@@ -98,3 +98,12 @@ def test_every_file_and_link_the_readme_names_exists():
     assert len(paths) >= 20
     missing = sorted({p for p in paths if not (ROOT / p.split("#")[0]).exists()})
     assert not missing
+
+
+def test_the_python_example_runs_and_gives_a_vertical_apparent_mass():
+    block = re.search(r"```python\n(.*?)```", README, flags=re.DOTALL).group(1)
+    scope: dict = {}
+    exec(compile(block, "README.md", "exec"), scope)
+    # At 1 m/s^2 the apparent mass rises from about 1 at 2 Hz to its 4-6 Hz resonance.
+    modulus = scope["modulus"]
+    assert 0.9 < modulus[0] < 1.1 and modulus[1] > 1.1 and modulus[2] > 1.1
