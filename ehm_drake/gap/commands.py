@@ -21,7 +21,7 @@ from .effects import EFFECT_NAMES
 def _default_hidden(reality: str | None) -> tuple[str, ...]:
     """The effects a blind run hides by default: every candidate the body
     implements (an independent reality may implement a subset)."""
-    from ..realities import MODEL_REALITY, get_reality
+    from ..realities import get_reality
 
     if not reality or reality == MODEL_REALITY:
         return EFFECT_NAMES
@@ -231,9 +231,8 @@ def cmd_blind(args) -> int:
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),
                      args.levels or DEFAULT_LEVELS, args.duration or DEFAULT_DURATION_S,
                      args.hidden or _default_hidden(args.reality), args.effects, args.p_none,
-                     args.p_two,
-                     workers=args.workers, reality=args.reality, references=args.references,
-                     contrasts=args.contrasts, c3d=args.c3d,
+                     args.p_two, workers=args.workers, reality=args.reality,
+                     references=args.references, contrasts=args.contrasts, c3d=args.c3d,
                      params=None if params is None else params.to_dict())
     s = run_blind(spec, args.out, progress=not args.quiet)
     def pct(x):
