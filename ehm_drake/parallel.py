@@ -89,6 +89,37 @@ def _init(initializer, initargs, environ: dict, parent: int) -> None:
         initializer(*initargs)
 
 
+#: Threads for the BLAS/LAPACK library under NumPy and SciPy (an
+#: environment variable, read at import): 1 unless set.  A multi-threaded
+#: BLAS splits sums across threads and rounds differently from one thread
+#: (about 1e-8 relative in a diagnosis' refit), so results would depend on
+#: the machine's thread configuration; and the model's matrices (tens of
+#: states) are too small for threads to pay: a diagnosis' candidate fit is
+#: ~15% faster on one.  The pools give every core a process instead.
+BLAS_THREADS_VARIABLE = "EHM_DRAKE_BLAS_THREADS"
+
+
+def pin_blas_threads() -> int | None:
+    """Limit NumPy's BLAS to `$EHM_DRAKE_BLAS_THREADS` threads (default 1;
+    ``0`` leaves the library's own choice) in this process and the pools'
+    workers, which import the package.  Returns the limit applied."""
+    raw = os.environ.get(BLAS_THREADS_VARIABLE, "1").strip()
+    try:
+        n = int(raw)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise ValueError(f"${BLAS_THREADS_VARIABLE}={raw!r}: expected a whole number of "
+                         "threads (0 leaves the BLAS library's own choice)")
+    if n == 0:
+        return None
+    import numpy  # noqa: F401  (loads the BLAS library threadpoolctl finds)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(n, user_api="blas")
+    return n
+
+
 def worker_count(workers: int | None = None) -> int:
     """`workers`, or the machine's cores; between 1 and 8."""
     return max(1, min(workers or (os.cpu_count() or 1), 8))

@@ -35,7 +35,10 @@ def test_command_outputs_are_byte_identical_to_the_stored_ones(tmp_path):
         if (EXPECTED / rel).exists():
             old = (EXPECTED / rel).read_bytes().decode(errors="replace").splitlines()
             new = data.decode(errors="replace").splitlines()
-            first = next((f"\n    {d}" for d in difflib.unified_diff(old, new, n=0, lineterm="")
-                          if d[:1] in "+-" and d[:3] not in ("+++", "---")), "")
+            # The first removed line and the first added one (stored, new).
+            lines = [d for d in difflib.unified_diff(old, new, n=0, lineterm="")
+                     if d[:1] in "+-" and d[:3] not in ("+++", "---")]
+            first = "".join(f"\n    {d}" for d in
+                            [next((d for d in lines if d[0] == c), "") for c in "-+"] if d)
         differ.append(rel + first)
     assert not differ, "outputs changed:\n  " + "\n  ".join(differ)

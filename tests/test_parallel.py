@@ -20,6 +20,35 @@ def _worker_view(name: str) -> tuple:
     return os.environ.get(name), os.getpid(), sorted(m for m in PRELOAD if m in sys.modules)
 
 
+def _blas_threads(_=None) -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return sorted({i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"})
+
+
+def test_blas_runs_one_thread_in_the_caller_and_in_the_workers():
+    """A multi-threaded BLAS rounds sums differently from one thread, so a
+    diagnosis' refit would change in its eighth digit with the machine's
+    thread count; the package pins it, workers included."""
+    assert _blas_threads() == [1]
+    assert run_jobs([(_blas_threads, None)] * 2, workers=2) == [[1], [1]]
+
+
+def test_the_blas_thread_count_is_the_users_to_change():
+    import subprocess
+
+    code = ("import ehm_drake, threadpoolctl; print(sorted({i['num_threads'] for i in "
+            "threadpoolctl.threadpool_info() if i['user_api'] == 'blas'}))")
+    env = dict(os.environ, EHM_DRAKE_BLAS_THREADS="2")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip() == "[2]"
+    env["EHM_DRAKE_BLAS_THREADS"] = "two"
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert r.returncode != 0
+    assert "EHM_DRAKE_BLAS_THREADS='two': expected a whole number" in r.stderr
+
+
 def test_results_come_back_in_order_from_other_processes():
     out = run_jobs([(abs, -k) for k in range(7)], workers=2)
     assert out == list(range(7))
