@@ -196,7 +196,7 @@ def test_posture_is_held_at_a_5_ms_step():
 def _parameter_damping(params, layout):
     """Passive damping + PID derivative gain per rotational DoF: the
     parameter file's joint damping about each Cardan axis."""
-    from ehm_drake.model.plant import PID_GROUP_OF
+    from ehm_drake.model.joint_layout import PID_GROUP_OF
     return np.array([getattr(params.passive, g).damping[a]
                      + getattr(params.pid, PID_GROUP_OF[g]).kd[a]
                      for g, a in zip(layout.groups, layout.axes, strict=True)])

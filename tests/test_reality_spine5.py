@@ -22,6 +22,7 @@ from ehm_drake.realities.spine5 import params as P
 from ehm_drake.realities.spine5.body import G, build_body
 from ehm_drake.realities.spine5.check import apparent_mass, peak, transmissibility
 from ehm_drake.realities.spine5.effects import EFFECT_NAMES
+from ehm_drake.realities.spine5.forces import build_diagram
 from ehm_drake.realities.spine5.model import ARM_DAMPING_PER_STIFFNESS_S, Spine5Model
 from ehm_drake.signals import make_seat_signal
 
@@ -112,7 +113,7 @@ def test_viscoelastic_joint_relaxes_with_its_time_constant(reality, nominal):
     from pydrake.systems.analysis import Simulator
 
     model = Spine5Model(nominal.values, {})
-    model.build_diagram()
+    build_diagram(model)
     forces = model.forces
     forces.configure(nominal.q_ref, nominal.a_ff, nominal.R_head_ref)
     forces.set_offsets(nominal.offsets)

@@ -39,15 +39,16 @@ def _resolve(module: str, node: ast.ImportFrom, is_package: bool) -> str:
 
 
 def _import_graph() -> dict[str, set[str]]:
-    """Module -> package modules it imports at import time (top-level
-    statements only: imports inside functions run later and cannot close
-    a cycle at import)."""
+    """Module -> package modules it imports, imports inside functions
+    included: one there cannot close a cycle at import time, but it hides
+    a circle in the design all the same (two modules that need each other
+    are one idea, or a third one is missing)."""
     mods = _modules()
     graph = {}
     for name, path in mods.items():
         deps = set()
         is_pkg = path.name == "__init__.py"
-        for node in ast.parse(path.read_text()).body:
+        for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):

@@ -98,6 +98,7 @@ from .models import (
     Statics,
     TestInput,
     coordinate,
+    family_of,
     family_specs,
     fit_candidate,
 )
@@ -447,17 +448,6 @@ def _ranking_entry(name, res, base, n_base, n_rows, base_names, keys) -> dict:
         "base_scales": {n: float(math.exp(b)) for n, b in zip(base_names, theta[:n_base],
                                                               strict=True)},
     }
-
-
-def family_of(state: dict, name: str):
-    """The (re-centered) family candidate `name` was fitted with."""
-    cand = Candidate(() if name == "none" else tuple(name.split("+")))
-    fam = state["families"][cand.grid_effect or "base"]
-    rec = state.get("recentered", {}).get(name)
-    if rec is not None:
-        fam = copy.copy(fam)
-        fam.anchor, fam.correction = rec
-    return fam
 
 
 def separating_experiment(best: dict, other: dict, state: dict) -> dict:

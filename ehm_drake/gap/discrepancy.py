@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .localize import BANDS, cell_keys, chi2_rows, delta_bic, gap_value, mark_after
-from .models import BASE_PRIOR_SIGMA, Candidate, Predictor, Statics, row_sigma
+from .models import BASE_PRIOR_SIGMA, Candidate, Predictor, Statics, family_of, row_sigma
 
 #: Hat functions in log-frequency over 0.1-12 Hz.
 KNOTS = 6
@@ -217,8 +217,6 @@ def _init_worker(state: dict) -> None:
 
 
 def _predictor(name: str) -> Predictor:
-    from .diagnose import family_of
-
     cand = Candidate(() if name == "none" else tuple(name.split("+")))
     fam = family_of(_S, name)
     return Predictor(fam, cand, _S["rows"], _S["tests"], _S["base_names"],

@@ -43,6 +43,7 @@ How each effect enters:
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -670,3 +671,14 @@ def fit_candidate(pred: Predictor, mask, theta0=None, rounds: int = 2,
     cost = float(np.sum(residuals(pred, theta, mask) ** 2))
     return CandidateFit(pred.candidate, theta, list(pred.sigmas), cost, nfev,
                         time.perf_counter() - t0)
+
+
+def family_of(state: dict, name: str):
+    """The (re-centered) family candidate `name` was fitted with."""
+    cand = Candidate(() if name == "none" else tuple(name.split("+")))
+    fam = state["families"][cand.grid_effect or "base"]
+    rec = state.get("recentered", {}).get(name)
+    if rec is not None:
+        fam = copy.copy(fam)
+        fam.anchor, fam.correction = rec
+    return fam

@@ -72,6 +72,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .joint_layout import pid_vectors
+
 #: The contact pairs whose tissue softens: under the ischial tuberosities and
 #: the thighs on the pan, and the back (lumbar and scapular) at the pads; not
 #: the soles of the feet.
@@ -123,8 +125,6 @@ def element_set(params, points=(), layout=None) -> ElementSet:
     """The enabled softening elements of `params`: the restraint points of
     `points` on the `TISSUE_PAIRS` (tissue) and the rotational DoFs of
     `layout` in the `MUSCLE_GROUPS` with kp > 0 (muscle)."""
-    from .plant import pid_vectors
-
     kinds, names, k0, kt, r, sc, tau = [], [], [], [], [], [], []
     t = params.softening.tissue
     if t.enabled:

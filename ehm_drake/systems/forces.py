@@ -35,7 +35,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 
-from ..model.plant import JointLayout
+from ..model.joint_layout import JointLayout
 from ..model.restraints import deepest_points
 from . import PlantScratch, define_system
 from .his import head_in_space_torque

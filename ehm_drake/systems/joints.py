@@ -34,7 +34,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 
-from ..model.plant import JointLayout
+from ..model.joint_layout import JointLayout
 from . import define_system
 
 

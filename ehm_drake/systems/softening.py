@@ -39,7 +39,7 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
-from ..model.plant import JointLayout
+from ..model.joint_layout import JointLayout
 from ..model.softening import ElementSet, element_spring, equivalent_loss, stationary_rms
 from . import PlantScratch, define_system
 from .joints import _BallIndex, cardan_to_generalized

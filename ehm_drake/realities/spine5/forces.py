@@ -10,7 +10,7 @@ from pydrake.multibody.tree import (
     JacobianWrtVariable,
     MultibodyForces,
 )
-from pydrake.systems.framework import BasicVector, LeafSystem
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
 from .model import (
     FOAM_MAX_FACTOR,
@@ -435,3 +435,16 @@ class Spine5Forces(LeafSystem):
         th = x[:self.nq][self.m.dofs.iq]
         tau[self.m.dofs.iv] += self.passive_torque(th, th)
         return tau, F, an, dpen, slip
+
+
+def build_diagram(model: Spine5Model):
+    """The plant of `model` with its force system in a diagram;
+    `model.forces` is then the force system."""
+    builder = DiagramBuilder()
+    builder.AddSystem(model.plant)
+    forces = builder.AddSystem(Spine5Forces(model))
+    builder.Connect(model.plant.get_state_output_port(), forces.get_input_port(0))
+    builder.Connect(forces.get_output_port(0),
+                    model.plant.get_applied_generalized_force_input_port())
+    model.forces = forces
+    return builder.Build()

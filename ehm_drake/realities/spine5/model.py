@@ -53,7 +53,6 @@ from pydrake.multibody.tree import (
     RpyFloatingJoint,
     SpatialInertia,
 )
-from pydrake.systems.framework import DiagramBuilder
 
 from .body import BodyModel, G, build_body
 
@@ -315,15 +314,3 @@ class Spine5Model:
         q = np.zeros(self.nq)
         q[self.iq_float[3:]] = self.body.segments["pelvis"].origin
         return q
-
-    def build_diagram(self):
-        builder = DiagramBuilder()
-        builder.AddSystem(self.plant)
-        from .forces import Spine5Forces  # the force system builds on this module
-
-        forces = builder.AddSystem(Spine5Forces(self))
-        builder.Connect(self.plant.get_state_output_port(), forces.get_input_port(0))
-        builder.Connect(forces.get_output_port(0),
-                        self.plant.get_applied_generalized_force_input_port())
-        self.forces = forces
-        return builder.Build()

@@ -13,6 +13,7 @@ from pydrake.systems.analysis import Simulator
 from .. import CHANNEL_NAMES, DOFS, Reality, RealityError, RealityRecord
 from . import params as P
 from .effects import effect_values, validate_effects
+from .forces import build_diagram
 from .model import MARKER_SEGMENTS, TIME_STEP, Spine5Diverged, Spine5Model
 from .statics import Spine5StaticsError, solve_statics
 
@@ -120,7 +121,7 @@ class Spine5Reality(Reality):
         values = _subject_values(subject)
         effects = validate_effects(effects)
         model = self.build(values, effects)
-        model.build_diagram()
+        build_diagram(model)
         forces = model.forces
         try:
             st = solve_statics(model, forces)
@@ -158,7 +159,7 @@ class Spine5Reality(Reality):
         k0 = min(max(int(round(t_rec / h)), 0), n - 1)
         n_rec = n - k0
         model = self.build(prepared.values, prepared.effects)
-        diagram = model.build_diagram()
+        diagram = build_diagram(model)
         forces = model.forces
         sim = Simulator(diagram)
         ctx = sim.get_mutable_context()
