@@ -60,18 +60,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ehm_drake.gap.anchor import fit_anchor
-from ehm_drake.gap.diagnose import (
+from ehm_drake.gap.library.family import linearize_cut
+from ehm_drake.gap.library.models import STRENGTH_PATH, Candidate
+from ehm_drake.gap.reference_group.anchor import fit_anchor
+from ehm_drake.gap.reference_group.group import load_reference, wrap_log
+from ehm_drake.gap.reference_group.reference import _Scorer
+from ehm_drake.gap.single.diagnose import (
     DiagnosisError,
     candidate_names,
     load_families,
     load_lab_data,
     separation_slope,
 )
-from ehm_drake.gap.family import linearize_cut
-from ehm_drake.gap.group import load_reference, wrap_log
-from ehm_drake.gap.models import STRENGTH_PATH, Candidate
-from ehm_drake.gap.reference import _Scorer
 from ehm_drake.identification.parameters import resolve_free
 from ehm_drake.model.anthropometry import REFERENCE
 from ehm_drake.params import ParameterError, load_params, params_from_dict

@@ -111,7 +111,7 @@ def family_named(data: dict) -> dict:
     """Subjects with any candidate named under the library's thresholds
     (`calibration.thresholds`: each candidate's bound and the family-wise
     conformal test), and subjects."""
-    from ehm_drake.gap.calibration import thresholds
+    from ehm_drake.gap.reference_group.calibration import thresholds
 
     named = subjects = 0
     for entry in data.values():
@@ -129,7 +129,7 @@ def clipped_at(clip: float):
     """`calibration.null_threshold` with the cube-root bound's gains clipped
     at `clip` (the library's default is 0; stop 44 tried -MIN_GAIN): a
     threshold(null, n_candidates, borrowed_spread)."""
-    from ehm_drake.gap.calibration import null_threshold
+    from ehm_drake.gap.reference_group.calibration import null_threshold
 
     def threshold(null, n, spread):
         return null_threshold(null, n, borrowed_spread=spread, clip=clip)
@@ -137,7 +137,7 @@ def clipped_at(clip: float):
 
 
 def main(argv=None) -> int:
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN
+    from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, MIN_GAIN
 
     p = argparse.ArgumentParser(description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)

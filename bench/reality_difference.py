@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ehm_drake.gap.diagnose import load_lab_data
-from ehm_drake.gap.synth import SynthSpec, synthesize
+from ehm_drake.gap.lab.synth import SynthSpec, synthesize
+from ehm_drake.gap.single.diagnose import load_lab_data
 
 MIN_COHERENCE = 0.9
 BAND_HZ = (0.5, 12.0)

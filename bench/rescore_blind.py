@@ -17,7 +17,7 @@ It prints one line per trial and the summary (top-1, top-3, false alarms)
 judged against the run's bar; `--out` writes the per-trial reports' scores.
 
 With ``--rethreshold --contrasts DIR`` (contrast measurements of the run's
-reference subjects, `ehm_drake.gap.contrasts`; e.g. made afterwards for the
+reference subjects, `ehm_drake.gap.reference_group.contrasts`; e.g. made afterwards for the
 stored group with `blind --contrasts` settings) the effects in DIR are scored
 again with their measured signatures on each trial's stored data and the
 group's leave-one-out null, the other candidates keep their stored evidence,
@@ -56,11 +56,11 @@ def _with_contrasts(report, data, group, contrasts, nulls, scorer, better=False)
     null gains likewise, subject by subject)."""
     import numpy as np
 
-    from ehm_drake.gap.contrasts import contrast_evidence
-    from ehm_drake.gap.diagnose import load_lab_data
-    from ehm_drake.gap.group import wrap_log
-    from ehm_drake.gap.localize import cell_keys, gap_value
-    from ehm_drake.gap.reference import _gain
+    from ehm_drake.gap.reference_group.contrasts import contrast_evidence
+    from ehm_drake.gap.reference_group.group import wrap_log
+    from ehm_drake.gap.reference_group.reference import _gain
+    from ehm_drake.gap.single.diagnose import load_lab_data
+    from ehm_drake.gap.single.localize import cell_keys, gap_value
 
     keys = cell_keys(group.rows)
     lab = load_lab_data(data)
@@ -104,10 +104,10 @@ def main(argv=None) -> int:
                         "group (re-diagnoses)")
     args = p.parse_args(argv)
 
-    from ehm_drake.gap.blind import score, summarize
-    from ehm_drake.gap.diagnose import DiagnosisError, diagnose, load_lab_data
-    from ehm_drake.gap.group import load_reference
-    from ehm_drake.gap.reference import diagnose_with_reference, rethreshold
+    from ehm_drake.gap.lab.blind import score, summarize
+    from ehm_drake.gap.reference_group.group import load_reference
+    from ehm_drake.gap.reference_group.reference import diagnose_with_reference, rethreshold
+    from ehm_drake.gap.single.diagnose import DiagnosisError, diagnose, load_lab_data
     from ehm_drake.realities import MODEL_REALITY
 
     settings = json.loads((args.run / "blind_settings.json").read_text())
@@ -130,7 +130,11 @@ def main(argv=None) -> int:
                  if settings.get("references") and not args.rethreshold else None)
     contrasts = None
     if args.contrasts:
-        from ehm_drake.gap.contrasts import ContrastScorer, contrast_nulls, load_contrasts
+        from ehm_drake.gap.reference_group.contrasts import (
+            ContrastScorer,
+            contrast_nulls,
+            load_contrasts,
+        )
 
         group = load_reference([args.run / "reference"])
         contrasts = load_contrasts(args.contrasts, group)

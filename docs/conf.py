@@ -1,11 +1,25 @@
 """Sphinx configuration of the ehm_drake documentation (`sphinx-build -W docs docs/_build`).
 
-The pages are Markdown (MyST); the API reference is generated from the docstrings."""
+The pages are Markdown (MyST); the API reference is generated from the docstrings; the
+tutorials are the notebooks of `notebooks/`, copied into `tutorials/` when the build starts
+(shown as stored, without running them: the test suite runs each one in its test mode)."""
+
+import shutil
+from pathlib import Path
+
+_HERE = Path(__file__).resolve().parent
+_TUTORIALS = _HERE / "tutorials"
+shutil.rmtree(_TUTORIALS, ignore_errors=True)
+_TUTORIALS.mkdir()
+for _nb in sorted((_HERE.parent / "notebooks").glob("*.ipynb")):
+    shutil.copy2(_nb, _TUTORIALS / _nb.name)
 
 project = "ehm_drake"
 author = "the ehm_drake developers"
-extensions = ["sphinx.ext.autodoc", "sphinx.ext.napoleon", "sphinx.ext.mathjax", "myst_parser"]
-source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+# myst_nb reads the Markdown pages (it includes myst_parser) and the notebooks.
+extensions = ["sphinx.ext.autodoc", "sphinx.ext.napoleon", "sphinx.ext.mathjax", "myst_nb"]
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
+nb_execution_mode = "off"
 root_doc = "index"
 exclude_patterns = ["_build", "make_figures.py"]
 autodoc_member_order = "bysource"

@@ -3,7 +3,7 @@
 # The gap diagnosis' candidate effects register as model extensions (see
 # ehm_drake.model.extensions), so an `effects` mapping resolves wherever the
 # model is built; the module is light (no Drake at import).
-from .gap import effects as _effects  # noqa: F401
+from .gap.library import effects as _effects  # noqa: F401
 from .parallel import pin_blas_threads as _pin_blas_threads
 
 # One BLAS thread per process unless $EHM_DRAKE_BLAS_THREADS says otherwise:

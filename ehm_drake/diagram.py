@@ -217,7 +217,7 @@ def build_diagram(
         second contact solve per evaluation; linearizations that only need
         the body channels leave it out, as does AutoDiff, which it blocks).
     effects : model extensions to add, {name: {parameter: value}} (the
-        candidate unmodelled effects of `ehm_drake.gap.effects`; default
+        candidate unmodelled effects of `ehm_drake.gap.library.effects`; default
         none).
     controller_input : export an input port ``controller_state`` (plant
         [q; v]) that the PID and head-in-space controllers read instead of

@@ -36,8 +36,8 @@ def ignore_sigint(*_args) -> None:
 #: What the fork server imports once for all its workers (what the pools'
 #: jobs use; anything else a job needs is imported in its worker).
 PRELOAD = ["numpy", "scipy.optimize", "scipy.signal", "ehm_drake.diagram",
-           "ehm_drake.simulation", "ehm_drake.analysis.linear", "ehm_drake.gap.diagnose",
-           "ehm_drake.gap.synth", "ehm_drake.identification.fit"]
+           "ehm_drake.simulation", "ehm_drake.analysis.linear", "ehm_drake.gap.single.diagnose",
+           "ehm_drake.gap.lab.synth", "ehm_drake.identification.fit"]
 
 
 #: How often a worker checks that the process that made its pool is alive.

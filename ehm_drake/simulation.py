@@ -510,7 +510,7 @@ def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
            variant: str = "default", settle_time: float | None = None,
            progress: bool = False, effects: dict | None = None) -> SettledState:
     """Settle the body on the seat for `variant` (see module doc), with the
-    candidate `effects` (see `ehm_drake.gap.effects`) if given."""
+    candidate `effects` (see `ehm_drake.gap.library.effects`) if given."""
     eq_model = build_diagram(params, measures, None, "default", guard=False,
                              effects=equilibrium_effects(effects))
     ctx, smap = static_equilibrium(eq_model)

@@ -26,7 +26,7 @@ from ehm_drake.analysis.marker_map import (
 from ehm_drake.analysis.mocap import reduce_session, rigid_fit
 from ehm_drake.analysis.transmissibility import transmissibility
 from ehm_drake.cli import main
-from ehm_drake.gap.synth_c3d import virtual_session
+from ehm_drake.gap.lab.synth_c3d import virtual_session
 from ehm_drake.realities import CHANNEL_NAMES
 
 SAMPLES = Path(__file__).parent / "data" / "c3d"
@@ -365,7 +365,7 @@ def test_diagnose_gives_the_same_verdict_on_the_c3d_made_lab_folder(tmp_path):
     direct frf.csv (the synthetic lab's own folder) gives the same verdict and effect."""
     from test_gap_blind import CANDIDATES, SHORT_BLIND
 
-    from ehm_drake.gap.blind import BlindSpec, run_blind
+    from ehm_drake.gap.lab.blind import BlindSpec, run_blind
 
     # 60 s records: the C3D path's marker noise and the direct path's own
     # estimate differ by about 3% on 30 s records (see the round trip), enough

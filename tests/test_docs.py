@@ -1,5 +1,5 @@
-"""The documentation site: it builds with warnings as errors, and its API reference covers
-every module of the package."""
+"""The documentation site: it builds with warnings as errors, its API reference covers
+every module of the package and its tutorials are the notebooks."""
 
 from __future__ import annotations
 
@@ -26,10 +26,16 @@ def test_the_api_reference_covers_every_module():
     assert listed == _modules(), (sorted(_modules() - listed), sorted(listed - _modules()))
 
 
+def test_every_notebook_is_a_tutorial_of_the_site():
+    index = (ROOT / "docs" / "index.md").read_text()
+    listed = set(re.findall(r"^tutorials/(\S+)$", index, re.M))
+    assert listed == {p.stem for p in (ROOT / "notebooks").glob("*.ipynb")}
+
+
 @pytest.mark.slow
 def test_the_documentation_builds_without_a_warning(tmp_path):
     pytest.importorskip("sphinx")
-    pytest.importorskip("myst_parser")
+    pytest.importorskip("myst_nb")
     r = subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
                         "-d", str(tmp_path / "doctrees"), str(ROOT / "docs"),
                         str(tmp_path / "html")], capture_output=True, text=True, timeout=600)
@@ -38,3 +44,7 @@ def test_the_documentation_builds_without_a_warning(tmp_path):
     # The docstrings are there, not only the headings.
     index = (tmp_path / "html" / "index.html").read_text()
     assert "static_equilibrium" in html and "Desai" in index
+    # Each notebook is a page with its narrative and its code.
+    for nb in (ROOT / "notebooks").glob("*.ipynb"):
+        page = (tmp_path / "html" / "tutorials" / f"{nb.stem}.html").read_text()
+        assert "highlight-ipython3" in page and "ehm_drake" in page, nb.name

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ehm_drake.gap.effects import EFFECT_NAMES, EFFECTS, effect_values, validate_effects
-from ehm_drake.gap.localize import BANDS, Rows, band_index, localize, relative_variance
-from ehm_drake.gap.synth import SynthError, SynthSpec, synthesize
+from ehm_drake.gap.lab.synth import SynthError, SynthSpec, synthesize
+from ehm_drake.gap.library.effects import EFFECT_NAMES, EFFECTS, effect_values, validate_effects
+from ehm_drake.gap.single.localize import BANDS, Rows, band_index, localize, relative_variance
 from ehm_drake.systems.outputs import CHANNEL_NAMES
 
 #: Module fixtures: the module's tests stay on one xdist worker (built once).
@@ -72,7 +72,7 @@ def _rows(rng, coherence=0.9, n_avg=10, directions=("z",)):
 
 
 def _chi(rows, H_model):
-    from ehm_drake.gap.localize import chi2_rows
+    from ehm_drake.gap.single.localize import chi2_rows
 
     return chi2_rows(rows, H_model)
 
@@ -109,7 +109,7 @@ def test_an_effect_spread_below_every_cell_s_threshold_is_named_on_the_joint_tes
     significant cell where the candidate removed 77% and 65% of the held-out gap
     (delta BIC -728 and -632 on 12,240 rows); its no-effect and undetectable trials
     reached at most 40% (delta BIC -370).  The numbers are those trials'."""
-    from ehm_drake.gap.verdict import decide, joint_test
+    from ehm_drake.gap.single.verdict import decide, joint_test
 
     rows, n_cand = 12240, 8
     thin = [_entry("visceral_mass", -728.0, 0.77), _entry("backrest_separation", -30.0, 0.01, 3)]
@@ -152,7 +152,7 @@ def test_the_first_bin_of_a_welch_grid_is_not_analysed():
     """Its Hann main lobe reaches 0 Hz (tests/test_spectral.py measures the bias): the
     diagnosis drops it, per channel and level, and keeps a table that starts higher."""
     from ehm_drake.analysis.formats import FrfData
-    from ehm_drake.gap.localize import rows_from_frf
+    from ehm_drake.gap.single.localize import rows_from_frf
 
     def table(freqs, level):
         n = len(freqs)
@@ -317,7 +317,7 @@ def test_a_delay_of_n_steps_lags_the_plant_state_by_n_steps():
     )
     from pydrake.trajectories import PiecewisePolynomial
 
-    from ehm_drake.gap.effects import delay_system
+    from ehm_drake.gap.library.effects import delay_system
 
     h = 0.005
     for steps in (1, 2, 6):
@@ -346,7 +346,7 @@ def test_a_delay_of_n_steps_lags_the_plant_state_by_n_steps():
 
 
 def test_maxwell_equivalent_matches_the_describing_function():
-    from ehm_drake.gap.models import jenkins_factors, maxwell_equivalent
+    from ehm_drake.gap.library.models import jenkins_factors, maxwell_equivalent
 
     w = 2 * np.pi * 3.0
     for r in (0.3, 1.0, 3.0):
@@ -367,8 +367,8 @@ def test_creeping_slip_lets_the_body_slide_below_its_rate():
     a Maxwell element), while well above lam the restraint holds as before."""
     from types import SimpleNamespace
 
-    from ehm_drake.gap.family import response
-    from ehm_drake.gap.models import Predictor
+    from ehm_drake.gap.library.family import response
+    from ehm_drake.gap.library.models import Predictor
 
     m, k, h, lam = 10.0, 1e4, 1e-3, 2 * np.pi * 1.0
     # Symplectic Euler of m x'' = -k (x - s) + F: state [x, v].

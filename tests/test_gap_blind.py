@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from ehm_drake.gap.synth import SynthError, SynthSpec, synthesize
+from ehm_drake.gap.lab.synth import SynthError, SynthSpec, synthesize
 
 #: One module fixture (the blind run): its tests stay on one xdist worker.
 pytestmark = pytest.mark.xdist_group("gap_blind")
@@ -37,7 +37,7 @@ SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duratio
 
 @pytest.fixture(scope="module")
 def blind_run(tmp_path_factory):
-    from ehm_drake.gap.blind import BlindSpec, run_blind
+    from ehm_drake.gap.lab.blind import BlindSpec, run_blind
 
     out = tmp_path_factory.mktemp("blind")
     spec = BlindSpec(**SHORT_BLIND, workers=2)
@@ -46,7 +46,7 @@ def blind_run(tmp_path_factory):
 
 @pytest.mark.slow
 def test_short_blind_run_meets_the_acceptance(blind_run):
-    from ehm_drake.gap.blind import ACCEPTANCE
+    from ehm_drake.gap.lab.blind import ACCEPTANCE
 
     out, _, s = blind_run
     labels = {t: {p: n for p, n in row.items() if n} for t, row in s["confusion"].items()}
@@ -73,8 +73,8 @@ def test_detectability_is_decided_from_the_key(blind_run):
     """The foam trial is detectable (many cells); the same subject without
     the effect leaves nothing once the base model is refit; a gap the
     diagnosis found counts as detectable whatever the check says."""
-    from ehm_drake.gap.blind import detectability, score
-    from ehm_drake.gap.effects import EFFECTS
+    from ehm_drake.gap.lab.blind import detectability, score
+    from ehm_drake.gap.library.effects import EFFECTS
 
     out, spec, s = blind_run
     res = json.loads((out / "trial_001" / "result.json").read_text())
@@ -97,7 +97,7 @@ def test_detectability_is_decided_from_the_key(blind_run):
 @pytest.mark.slow
 def test_synth_is_deterministic_and_keeps_the_truth_out_of_the_data(blind_run, tmp_path):
     """The blind run's no-effect trial, synthesized again from its seed."""
-    from ehm_drake.gap.blind import plan
+    from ehm_drake.gap.lab.blind import plan
 
     out, spec, _ = blind_run
     tr = plan(spec)[0]
@@ -120,7 +120,7 @@ def test_synth_is_deterministic_and_keeps_the_truth_out_of_the_data(blind_run, t
 
 @pytest.mark.slow
 def test_blind_run_resumes_without_recomputing(blind_run):
-    from ehm_drake.gap.blind import run_blind
+    from ehm_drake.gap.lab.blind import run_blind
 
     out, spec, s = blind_run
     stamps = {p: p.stat().st_mtime_ns for p in out.glob("trial_*/result.json")}
@@ -166,7 +166,7 @@ def test_trial_fractions_that_cannot_add_up_are_refused_with_the_fix():
     error names both values and the way out (a run of no-effect subjects
     only, which measures the false-alarm rate), and that run plans no
     effect at all."""
-    from ehm_drake.gap.blind import BlindError, BlindSpec, plan
+    from ehm_drake.gap.lab.blind import BlindError, BlindSpec, plan
 
     with pytest.raises(BlindError, match=r"--p-none 1\.0 and --p-two 0\.1 add up to more than 1"
                                          r".*--p-none 1 --p-two 0"):
@@ -191,7 +191,7 @@ def test_a_blind_run_on_the_implicit_design_makes_and_diagnoses_its_data_there(t
     written once and passed to it), the foam is found as on the reference
     design, and resuming with the default model is refused."""
     from ehm_drake.diagram import on_design
-    from ehm_drake.gap.blind import BlindError, BlindSpec, run_blind
+    from ehm_drake.gap.lab.blind import BlindError, BlindSpec, run_blind
     from ehm_drake.params import load_params
 
     params = on_design(load_params(), "implicit")
@@ -214,7 +214,7 @@ def test_a_blind_run_on_the_implicit_design_makes_and_diagnoses_its_data_there(t
 def test_a_reflex_delay_is_keyed_as_the_steps_it_runs():
     """The key holds what the simulation realizes: a 24 ms delay runs as
     25 ms at 5 ms steps and as 24 ms at the reference design's 1 ms."""
-    from ehm_drake.gap.synth import _truth
+    from ehm_drake.gap.lab.synth import _truth
 
     at_5 = _truth("reflex_delay", 0.8, 0.005)
     assert at_5["values"]["tau_s"] == pytest.approx(0.024)

@@ -1,5 +1,5 @@
 """Empirical effect signatures from contrast measurements of the reference
-group (`ehm_drake.gap.contrasts`): loading and pairing, the amplitude fit
+group (`ehm_drake.gap.reference_group.contrasts`): loading and pairing, the amplitude fit
 under the group's scatter, the leave-one-out null, the errors, and the blind
 run's settings for them.  Synthetic subjects on disk; no model is built."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from ehm_drake.analysis.formats.frf import FrfData
-from ehm_drake.gap.calibration import thresholds
-from ehm_drake.gap.contrasts import (
+from ehm_drake.gap.reference_group.calibration import thresholds
+from ehm_drake.gap.reference_group.contrasts import (
     LOW_AGREEMENT,
     MIN_CONTRASTS,
     Contrasts,
@@ -22,8 +22,8 @@ from ehm_drake.gap.contrasts import (
     load_contrasts,
     smoothing_bins,
 )
-from ehm_drake.gap.diagnose import DiagnosisError, load_lab_data
-from ehm_drake.gap.group import load_reference, wrap_log
+from ehm_drake.gap.reference_group.group import load_reference, wrap_log
+from ehm_drake.gap.single.diagnose import DiagnosisError, load_lab_data
 
 F = np.round(np.arange(0.3, 12.01, 0.3), 6)
 CHANNELS = (("pelvis", "z"), ("trunk", "pitch"), ("head", "pitch"))
@@ -294,8 +294,8 @@ def test_diagnose_contrasts_needs_a_reference(tmp_path, capsys):
 
 
 def test_blind_contrasts_are_reference_subjects_in_another_sitting():
-    from ehm_drake.gap.blind import BlindError, BlindSpec
-    from ehm_drake.gap.synth import SynthError, SynthSpec, _test_seeds
+    from ehm_drake.gap.lab.blind import BlindError, BlindSpec
+    from ehm_drake.gap.lab.synth import SynthError, SynthSpec, _test_seeds
 
     for n, refs in ((1, 8), (9, 8), (2, 0)):
         with pytest.raises(BlindError, match="--contrasts"):

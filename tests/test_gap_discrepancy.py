@@ -4,8 +4,8 @@ known truths, known noise, no model."""
 import numpy as np
 import pytest
 
-from ehm_drake.gap.blind import score
-from ehm_drake.gap.discrepancy import (
+from ehm_drake.gap.lab.blind import score
+from ehm_drake.gap.single.discrepancy import (
     EXPLAINED_BEYOND,
     KNOTS,
     SCALE_BOUNDS,
@@ -14,7 +14,7 @@ from ehm_drake.gap.discrepancy import (
     basis,
     estimate_scale,
 )
-from ehm_drake.gap.localize import Rows, band_index, chi2_rows, localize, relative_variance
+from ehm_drake.gap.single.localize import Rows, band_index, chi2_rows, localize, relative_variance
 from ehm_drake.systems.outputs import CHANNEL_NAMES
 
 CHANNELS = ["pelvis_z", "trunk_x", "head_pitch", "head_z", "knee_l_z"]
@@ -148,14 +148,14 @@ def _sp(ran=True, best_beyond=0.05):
 
 
 def test_the_report_says_structural_and_where_or_names_the_effect_beyond_it(monkeypatch):
-    from ehm_drake.gap import discrepancy as mod
+    from ehm_drake.gap.single import discrepancy as mod
 
     rows = type("R", (), {})()
     monkeypatch.setattr(mod, "cell_keys", lambda rows: np.array(["a"] * 200))
     monkeypatch.setattr(mod, "gap_value", lambda chi, keys: 0.5)
     cells = [{"direction": "z", "segment": "head", "dof": "z", "f_lo_hz": 2.5, "gap": 0.1,
               "significant": False}]
-    monkeypatch.setattr("ehm_drake.gap.localize.localize", lambda rows, chi: cells)
+    monkeypatch.setattr("ehm_drake.gap.single.localize.localize", lambda rows, chi: cells)
     rep = _report()
     apply_to_report(rep, _sp(best_beyond=0.05), rows)
     assert rep["verdict"] == "structural" and rep["best_effect"] is None

@@ -29,7 +29,7 @@ SHORT_BLIND = dict(trials=1, seed=21, directions="z", levels=(0.3, 0.6), duratio
 
 @pytest.fixture(scope="module")
 def reality_blind(tmp_path_factory):
-    from ehm_drake.gap.blind import BlindSpec, run_blind
+    from ehm_drake.gap.lab.blind import BlindSpec, run_blind
 
     out = tmp_path_factory.mktemp("blind_lumped")
     spec = BlindSpec(**SHORT_BLIND, workers=2)
@@ -37,7 +37,7 @@ def reality_blind(tmp_path_factory):
 
 
 def test_no_effect_named_on_a_reality_and_the_structural_gap_located(reality_blind):
-    from ehm_drake.gap.blind import ACCEPTANCE
+    from ehm_drake.gap.lab.blind import ACCEPTANCE
 
     out, s = reality_blind
     assert s["trials"] == 1 and s["no_effect_trials"] == 1

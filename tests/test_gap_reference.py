@@ -1,4 +1,4 @@
-"""Diagnosis against a reference group (`ehm_drake.gap.reference`).
+"""Diagnosis against a reference group (`ehm_drake.gap.reference_group.reference`).
 
 Fast: the group's statistics (geometric mean of gain and phase, deviations,
 leave-one-out), the protocol check and the profiled scatter term (its chi^2
@@ -18,11 +18,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from ehm_drake.gap.diagnose import DiagnosisError, LabData
-from ehm_drake.gap.group import MIN_SUBJECTS, ReferenceGroup, level_pairs
-from ehm_drake.gap.localize import Rows, band_index
-from ehm_drake.gap.models import TestInput as _TestInput
-from ehm_drake.gap.reference import profile_nuisance
+from ehm_drake.gap.library.models import TestInput as _TestInput
+from ehm_drake.gap.reference_group.group import MIN_SUBJECTS, ReferenceGroup, level_pairs
+from ehm_drake.gap.reference_group.reference import profile_nuisance
+from ehm_drake.gap.single.diagnose import DiagnosisError, LabData
+from ehm_drake.gap.single.localize import Rows, band_index
 from ehm_drake.params import load_params
 
 
@@ -101,7 +101,7 @@ def test_protocol_checks():
     with pytest.raises(DiagnosisError, match="link_to_s2 holds the same data as s2"):
         ReferenceGroup.from_labs([*labs, twice])
     # A subject with a zero gain: a clear error before any model work.
-    from ehm_drake.gap.reference import diagnose_with_reference
+    from ehm_drake.gap.reference_group.reference import diagnose_with_reference
     bad = _lab(lambda f, lv, ch: np.where(f > 6, 0.0, 1.0) + 0j, name="bad")
     with pytest.raises(DiagnosisError, match="zero or non-finite"):
         diagnose_with_reference(bad, g, progress=False)
@@ -141,8 +141,8 @@ def _stub_scorer(group, sig_of, upper, statics=None):
     signature `sig_of` on [0, upper] (no response statistics to refresh);
     with `statics` (`models.Statics`), the pads' static facts of a
     backrest separation (default: no pad point ever unloads)."""
-    from ehm_drake.gap.models import Statics
-    from ehm_drake.gap.reference import _Scorer
+    from ehm_drake.gap.library.models import Statics
+    from ehm_drake.gap.reference_group.reference import _Scorer
 
     scorer = object.__new__(_Scorer)
     scorer.tests = group.tests
@@ -161,8 +161,8 @@ def test_a_signature_flat_along_the_strength_path_is_still_fitted():
     only beyond it: the candidate's fit starts at the far end of its bounds
     too, and finds a separation there (from the strength path and the
     effect off alone the descent never moves and the gain is 0)."""
-    from ehm_drake.gap.models import Candidate
-    from ehm_drake.gap.reference import _gain
+    from ehm_drake.gap.library.models import Candidate
+    from ehm_drake.gap.reference_group.reference import _gain
 
     labs, _ = _subjects(6, seed=5)
     g = ReferenceGroup.from_labs(labs)
@@ -189,8 +189,8 @@ def test_a_separation_reaches_the_offset_where_the_anchors_pads_unload():
     raised bound, and is named with a large gain.  With the model's bound
     and starts alone it stays near "off" with no gain (the stop-31 fit on
     `spine5`'s separation trials)."""
-    from ehm_drake.gap.models import Statics
-    from ehm_drake.gap.reference import SEPARATION_REACH, _gain
+    from ehm_drake.gap.library.models import Statics
+    from ehm_drake.gap.reference_group.reference import SEPARATION_REACH, _gain
 
     labs, _ = _subjects(6, seed=5)
     g = ReferenceGroup.from_labs(labs)
@@ -226,9 +226,9 @@ def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
     wrong, growing one from there on, so that every start on the strength
     path costs more than "off".  The data carry the effect at 3% of the
     model's full strength: only the weak starts below the path find it."""
-    from ehm_drake.gap.effects import EFFECTS
-    from ehm_drake.gap.models import STRENGTH_PATH, Candidate
-    from ehm_drake.gap.reference import _gain
+    from ehm_drake.gap.library.effects import EFFECTS
+    from ehm_drake.gap.library.models import STRENGTH_PATH, Candidate
+    from ehm_drake.gap.reference_group.reference import _gain
 
     labs, _ = _subjects(6, seed=7)
     g = ReferenceGroup.from_labs(labs)
@@ -257,7 +257,7 @@ def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
 
 
 def test_candidates_without_held_out_gain_have_no_rank_for_top3():
-    from ehm_drake.gap.blind import score
+    from ehm_drake.gap.lab.blind import score
 
     ranking = [{"effect": "seat_friction", "heldout_gain": 40.0, "gap_reduction_heldout": 0.1},
                {"effect": "reflex_delay", "heldout_gain": 0.0, "gap_reduction_heldout": 0.0},
@@ -274,7 +274,7 @@ def test_a_reality_is_judged_against_its_own_bar():
     """On an independent reality: top-1 >= 75%, top-3 >= 90%, false alarms
     <= 10%, at least 30 scored trials, no held-out share required; on the
     model itself: 80 / 95 / 10 and a 70% held-out share."""
-    from ehm_drake.gap.blind import markdown, summarize
+    from ehm_drake.gap.lab.blind import markdown, summarize
 
     def trial(i, hit, effect=True, in_top3=False):
         return {"trial": i, "hidden": {"arms": 1.0} if effect else {}, "score": {
@@ -301,7 +301,7 @@ def test_a_reality_is_judged_against_its_own_bar():
 
 
 def test_a_diverging_twin_leaves_the_trial_detectable(tmp_path, monkeypatch):
-    from ehm_drake.gap import blind
+    from ehm_drake.gap.lab import blind
     from ehm_drake.realities import RealityError
 
     def diverge(*args):
@@ -341,7 +341,7 @@ def test_blind_run_records_a_diverging_reality_trial_and_goes_on(tmp_path, monke
     """A reality whose simulation diverges on a trial (the lumped body did on
     a reflex delay with backrest separation) leaves that trial skipped with
     its reason; the run continues and resumes without redoing it."""
-    from ehm_drake.gap import blind
+    from ehm_drake.gap.lab import blind
     from ehm_drake.realities import RealityError
 
     calls = []
@@ -380,7 +380,7 @@ SHORT_BLIND = dict(trials=2, seed=21, directions="z", levels=(0.3, 0.6), duratio
 
 @pytest.fixture(scope="module")
 def reference_blind(tmp_path_factory):
-    from ehm_drake.gap.blind import BlindSpec, run_blind
+    from ehm_drake.gap.lab.blind import BlindSpec, run_blind
 
     out = tmp_path_factory.mktemp("blind_lumped_reference")
     spec = BlindSpec(**SHORT_BLIND, workers=2)
@@ -390,7 +390,7 @@ def reference_blind(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.xdist_group("gap_reference")
 def test_reference_group_blind_run_on_a_reality(reference_blind):
-    from ehm_drake.gap.blind import ACCEPTANCE, acceptance_for
+    from ehm_drake.gap.lab.blind import ACCEPTANCE, acceptance_for
 
     out, s = reference_blind
     subjects = sorted((out / "reference").glob("subject_*/frf.csv"))
@@ -480,7 +480,7 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
         (none / "diagnosis" / "report.md").read_text()
     assert "reference group of 4" in (out / "blind.md").read_text()
     # Judged again from its stored gains, the report keeps its verdict.
-    from ehm_drake.gap.reference import rethreshold
+    from ehm_drake.gap.reference_group.reference import rethreshold
 
     again = rethreshold(rep)
     assert (again["verdict"], again["best_effect"]) == (rep["verdict"], rep["best_effect"])
@@ -499,8 +499,8 @@ def test_a_stored_report_is_judged_again_with_the_current_thresholds():
     significant cells, else `no_significant_gap`."""
     from scipy.stats import t as student_t
 
-    from ehm_drake.gap.calibration import null_threshold
-    from ehm_drake.gap.reference import rethreshold
+    from ehm_drake.gap.reference_group.calibration import null_threshold
+    from ehm_drake.gap.reference_group.reference import rethreshold
 
     null = [0.0, 3.0, 5.0, 8.0, 12.0, 20.0, 35.0, 160.0]
     q = student_t.ppf(1 - 0.1 / 3, 7) * np.sqrt(1 + 1 / 8)
@@ -538,7 +538,7 @@ def test_the_candidate_furthest_beyond_its_own_threshold_is_named():
     (`lumped` seed 2046 with the thresholds of stops 41-43: a reflex delay
     at 243 against 68 lost to the seat cushion's 369 against 318).  The candidates below their null
     follow, by evidence; with none beyond, the verdict does not name one."""
-    from ehm_drake.gap.reference import decide
+    from ehm_drake.gap.reference_group.reference import decide
 
     def entry(name, evidence, threshold, red):
         return {"effect": name, "evidence": evidence, "null_threshold": threshold,
@@ -564,7 +564,7 @@ def test_null_gains_are_not_reused_from_other_scoring_code(monkeypatch):
     """The cached null gains are keyed by the scoring code as well as the
     group, candidates and anchor: a change to how candidates are scored
     never reuses thresholds computed by the old code."""
-    from ehm_drake.gap import reference
+    from ehm_drake.gap.reference_group import reference
 
     labs, _ = _subjects(5, seed=1)
     g = ReferenceGroup.from_labs(labs)
@@ -584,7 +584,7 @@ def test_null_threshold_is_a_prediction_bound_for_normal_gains():
     makes it conservative, but by less than a third), whatever the gains'
     location and spread: checked by drawing 20000 groups of K = 8 and one
     more subject each (seeded)."""
-    from ehm_drake.gap.calibration import MIN_GAIN, null_threshold
+    from ehm_drake.gap.reference_group.calibration import MIN_GAIN, null_threshold
 
     rng = np.random.default_rng(3)
     for loc, scale in ((500.0, 200.0), (-400.0, 300.0)):
@@ -612,7 +612,7 @@ def test_null_threshold_holds_its_level_for_chi2_like_gains(dof):
     effect.  20000 groups of K = 8 and one more subject each (seeded)."""
     from scipy.stats import t as student_t
 
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
+    from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
     rng = np.random.default_rng(4 + dof)
     g = 100.0 * rng.chisquare(dof, (20000, 9))
@@ -633,7 +633,7 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
     was 5.6 times the true 1.25% quantile): the threshold stays within 2
     times of that quantile and is exceeded at most at the nominal rate
     (within 1.6 times).  20000 groups of K = 8 (seeded)."""
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
+    from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, null_threshold
 
     rng = np.random.default_rng(11)
 
@@ -690,7 +690,7 @@ def test_effect_atlas_loop_response_is_the_delayed_closed_loop():
     w d h) - 1) is `family.response` with that delay (its Woodbury form);
     no extra term is the undelayed loop; a part and its rest delayed alike
     are the whole delayed."""
-    from ehm_drake.gap.family import response
+    from ehm_drake.gap.library.family import response
 
     atlas = _bench("effect_atlas")
     rng = np.random.default_rng(5)
@@ -722,7 +722,7 @@ def test_effect_atlas_feedback_parts_add_up_to_the_cut_feedback():
     head-in-space controller and the PIDs' proportional paths are all of
     the feedback's action on the body; the rest of Bw K is the integrals'
     input (h e on the integral states, whatever the gains)."""
-    from ehm_drake.gap.family import linearize_cut
+    from ehm_drake.gap.library.family import linearize_cut
 
     atlas = _bench("effect_atlas")
     params = load_params()
@@ -754,7 +754,7 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     tried at stop 44: the cube-root gains clipped at -MIN_GAIN instead of 0
     name at most half as many (4 of 68), but found 30 of 51 effects on the
     fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
+    from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
     nc = _bench("null_calibration")
     data = json.loads((DATA / "lumped_null_evidence.json").read_text())
@@ -780,7 +780,7 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     (0.48 times the nominal level; at most the nominal level asserted, and
     not by refusing every effect).  What `group.RECOMMENDED_SUBJECTS` rests
     on, with the hits (docs/gap_diagnosis_realities.md, "A group of 16")."""
-    from ehm_drake.gap.calibration import FAMILY_ALPHA, null_threshold
+    from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, null_threshold
 
     nc = _bench("null_calibration")
     k8 = json.loads((DATA / "lumped_null_evidence.json").read_text())
@@ -806,8 +806,8 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
 def test_a_group_smaller_than_recommended_is_cautioned():
     """Below `RECOMMENDED_SUBJECTS` the report carries a caution that names
     the group's size and the recommendation; from there on none."""
-    from ehm_drake.gap.group import MIN_SUBJECTS, RECOMMENDED_SUBJECTS
-    from ehm_drake.gap.reference import group_size_caution
+    from ehm_drake.gap.reference_group.group import MIN_SUBJECTS, RECOMMENDED_SUBJECTS
+    from ehm_drake.gap.reference_group.reference import group_size_caution
 
     assert RECOMMENDED_SUBJECTS > MIN_SUBJECTS
     for k in (MIN_SUBJECTS, 8, RECOMMENDED_SUBJECTS - 1):
@@ -822,7 +822,7 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
     negative, spread several hundred) gets a threshold well above its largest
     null gain; identical null gains give MIN_GAIN; more candidates, a higher
     bar; bad nulls are refused."""
-    from ehm_drake.gap.calibration import MIN_GAIN, null_threshold
+    from ehm_drake.gap.reference_group.calibration import MIN_GAIN, null_threshold
 
     arms = [-439, -509, -943, -880, -115, -737, -189, -119]
     thr = null_threshold(arms, 8, alpha=0.1)
@@ -845,7 +845,7 @@ def test_a_candidate_no_reference_subject_fits_borrows_the_groups_spread():
     typical spread instead.  The nulls are `spine5`'s seed-2034 group at
     stop 32, where a subject with no hidden effect reached 180 with the
     backrest separation and was named."""
-    from ehm_drake.gap.calibration import (
+    from ehm_drake.gap.reference_group.calibration import (
         DEGENERATE_GAIN,
         MIN_GAIN,
         group_null_spread,
@@ -922,7 +922,7 @@ def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_eff
     effect is fitted (its strength within 5%) and gains far more than it
     does on a subject with the structure alone (which gains nothing there).
     A candidate that does not depend on the level has no level fit."""
-    from ehm_drake.gap.reference import _evidence, _gain
+    from ehm_drake.gap.reference_group.reference import _evidence, _gain
 
     labs = _level_group_labs()
     g = ReferenceGroup.from_labs(labs)
@@ -965,7 +965,7 @@ def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_i
     amplitude-driven) it is reported and not used.  On a subject with the
     effect itself the all-rows fit gains on the level differences too, and
     the evidence is the held-out plus the level gain."""
-    from ehm_drake.gap.reference import _evidence, _gain
+    from ehm_drake.gap.reference_group.reference import _evidence, _gain
 
     g = ReferenceGroup.from_labs(_level_group_labs())
     f, lv = g.rows.freq, g.rows.level
@@ -1007,8 +1007,8 @@ def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():
     a start there would find, stays unvisited (on the lumped reality's seed
     2032 such starts fitted 3-4 ms reflex delays on four trials where the
     strength path's starts found none, one of them that run's false alarm)."""
-    from ehm_drake.gap.effects import EFFECTS
-    from ehm_drake.gap.reference import _gain
+    from ehm_drake.gap.library.effects import EFFECTS
+    from ehm_drake.gap.reference_group.reference import _gain
 
     labs, _ = _subjects(6, seed=7)
     g = ReferenceGroup.from_labs(labs)
@@ -1051,7 +1051,7 @@ def test_the_family_wise_test_holds_its_level_whatever_the_gains_distribution():
     with the family-wise conformal test the rate is at most 1 / 17 (plus
     three Monte-Carlo standard errors), and a subject with a strong effect
     on one candidate is still named for it."""
-    from ehm_drake.gap.calibration import group_null_spread, thresholds
+    from ehm_drake.gap.reference_group.calibration import group_null_spread, thresholds
 
     rng = np.random.default_rng(55)
     groups = 600
@@ -1087,7 +1087,7 @@ def test_the_family_wise_test_on_measured_no_effect_subjects():
     scales, 0 of 30, 1 of 68, 0 of 42 with the runner-up scales of stop 56
     (both rules chosen after the `spine5` runs were seen, so this is a
     record, not a blind confirmation: docs/gap_diagnosis_realities.md)."""
-    from ehm_drake.gap.calibration import thresholds
+    from ehm_drake.gap.reference_group.calibration import thresholds
 
     nc = _bench("null_calibration")
     spine5 = json.loads((DATA / "spine5_null_evidence.json").read_text())
@@ -1113,7 +1113,7 @@ def test_family_scales_are_runner_ups_floored_by_their_median():
     least the candidates' median runner-up and MIN_GAIN; a value left out
     (None) counts for nothing; the scales do not depend on which subject
     holds which value (exchangeability)."""
-    from ehm_drake.gap.calibration import MIN_GAIN, family_scales
+    from ehm_drake.gap.reference_group.calibration import MIN_GAIN, family_scales
 
     vals = {"heavy": [0, 0, 0, 436, 1005, 3], "tight": [186, 119, 65, 57, 538, 46],
             "silent": [0, 0, 0, 0, 900, 0], "none": [None, 0, 5, 7, 2, 1]}
@@ -1137,7 +1137,7 @@ def test_a_heavy_cluster_on_one_candidate_does_not_hide_an_effect_on_another():
     is named (538 / 186 against 1,005 / 436).  (The group's 30 fresh
     no-effect subjects under the same rule:
     `test_the_family_wise_test_on_measured_no_effect_subjects`.)"""
-    from ehm_drake.gap.calibration import thresholds
+    from ehm_drake.gap.reference_group.calibration import thresholds
 
     entry = json.loads((DATA / "spine5_null_evidence.json").read_text())
     (group,) = entry.values()
@@ -1157,7 +1157,7 @@ def test_the_family_wise_test_refuses_nulls_of_unequal_subjects():
     nulls of different lengths, or a candidate without evidence, are
     refused with a message; with 8 subjects the largest score is used and
     the level said (1/9)."""
-    from ehm_drake.gap.calibration import thresholds
+    from ehm_drake.gap.reference_group.calibration import thresholds
 
     with pytest.raises(DiagnosisError, match="different lengths"):
         thresholds({"a": [0.0, 1.0, 2.0], "b": [0.0, 1.0]}, {"a": 0.0, "b": 0.0})
@@ -1181,7 +1181,7 @@ def test_a_candidate_held_back_by_the_family_wise_test_is_said():
     """When no candidate is named but one exceeds its own bound, the
     explanation names it with both scores (a lead, not a finding); none
     beyond its own bound, nothing said."""
-    from ehm_drake.gap.verdict import held_back_note
+    from ehm_drake.gap.single.verdict import held_back_note
 
     fam = {"score": 3.26, "subject_score": 1.91}
     ranking = [{"effect": "visceral_mass", "evidence": 538.0, "null_bound": 344.0},

@@ -257,7 +257,7 @@ def test_the_sdf_folder_resolves_outside_the_checkout(tmp_path):
 
 
 def test_the_candidate_effects_are_the_registered_extensions():
-    from ehm_drake.gap.effects import EFFECT_NAMES, validate_effects
+    from ehm_drake.gap.library.effects import EFFECT_NAMES, validate_effects
     from ehm_drake.model.extensions import extension_names, validate_extensions
 
     assert extension_names() == EFFECT_NAMES

@@ -12,8 +12,8 @@ import pytest
 from scipy import signal as sps
 
 from ehm_drake import realities
-from ehm_drake.gap.blind import twin_detectability
-from ehm_drake.gap.synth import SynthError, SynthSpec, synthesize
+from ehm_drake.gap.lab.blind import twin_detectability
+from ehm_drake.gap.lab.synth import SynthError, SynthSpec, synthesize
 from ehm_drake.realities import (
     CHANNEL_NAMES,
     Reality,

@@ -15,7 +15,7 @@ from ..cli_common import (
     prepare_output_dir,
 )
 from ..realities import MODEL_REALITY
-from .effects import EFFECT_NAMES
+from .library.effects import EFFECT_NAMES
 
 
 def _default_hidden(reality: str | None) -> tuple[str, ...]:
@@ -57,13 +57,15 @@ def add_gap_arguments(sub) -> None:
                    help="a reference group: data of subjects without the effects in question, "
                    "measured with the same protocol (subject folders, or a folder of them; at "
                    "least 4, 16 recommended). The subject is compared with the group, the "
-                   "model gives only the shape of each candidate (see ehm_drake.gap.reference)")
+                   "model gives only the shape of each candidate (see "
+                   "ehm_drake.gap.reference_group.reference)")
     p.add_argument("--contrasts", metavar="DIR", default=None,
                    help="with --reference: contrast measurements of the group's subjects, "
                    "DIR/<effect>/<subject>/ (the subject measured again with the effect "
                    "imposed; at least 2 per effect). Those effects are scored with their "
                    "measured signatures instead of the model's (default: the reference "
-                   "folder's own 'contrasts' folder, if any; see ehm_drake.gap.contrasts)")
+                   "folder's own 'contrasts' folder, if any; see "
+                   "ehm_drake.gap.reference_group.contrasts)")
     p.add_argument("--no-discrepancy", action="store_true",
                    help="leave out the model-form discrepancy (an unexplained gap stays "
                    "unexplained instead of being tested as a structural one)")
@@ -147,8 +149,8 @@ def _directions(text: str) -> str:
 def cmd_diagnose(args) -> int:
     from ..diagram import on_design
     from ..params import load_params
-    from .diagnose import diagnose
     from .report import write_report
+    from .single.diagnose import diagnose
 
     params = on_design(load_params(args.params), args.design, args.time_step)
     out = prepare_output_dir(args.out, args.force)
@@ -156,7 +158,7 @@ def cmd_diagnose(args) -> int:
         raise UsageError("--contrasts needs --reference (the contrasts are measurements of "
                          "the reference group's subjects)")
     if args.reference:
-        from .reference import diagnose_with_reference
+        from .reference_group.reference import diagnose_with_reference
 
         diag = diagnose_with_reference(args.data, args.reference, params, args.effects,
                                        workers=args.workers, progress=not args.quiet,
@@ -211,7 +213,13 @@ def _model_params(args, data_from_model: bool):
 
 
 def cmd_synth(args) -> int:
-    from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, parse_effects_arg, synthesize
+    from .lab.synth import (
+        DEFAULT_DURATION_S,
+        DEFAULT_LEVELS,
+        SynthSpec,
+        parse_effects_arg,
+        synthesize,
+    )
 
     spec = SynthSpec(parse_effects_arg(args.effect, args.strength), args.seed,
                      args.levels or DEFAULT_LEVELS, _directions(args.directions),
@@ -224,8 +232,8 @@ def cmd_synth(args) -> int:
 
 
 def cmd_blind(args) -> int:
-    from .blind import BlindSpec, run_blind
-    from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS
+    from .lab.blind import BlindSpec, run_blind
+    from .lab.synth import DEFAULT_DURATION_S, DEFAULT_LEVELS
 
     params = _model_params(args, True)
     spec = BlindSpec(args.trials, args.seed, _directions(args.directions),

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .contrasts import LOW_AGREEMENT
-from .diagnose import Diagnosis
-from .localize import BANDS, band_label
+from .reference_group.contrasts import LOW_AGREEMENT
+from .single.diagnose import Diagnosis
+from .single.localize import BANDS, band_label
 
 #: Keys of the interface (tools outside the package read them), in order.
 INTERFACE_KEYS = ("verdict", "best_effect", "ranking", "localization", "gap_before",

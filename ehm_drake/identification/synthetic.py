@@ -1,6 +1,6 @@
 """Synthetic measured FRFs from the linear model, with estimation noise of a
 given coherence (for identification studies and tests; the lab-like
-nonlinear time-domain data generator is `ehm_drake.gap.synth`)."""
+nonlinear time-domain data generator is `ehm_drake.gap.lab.synth`)."""
 
 from __future__ import annotations
 

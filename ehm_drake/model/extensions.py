@@ -32,10 +32,10 @@ simulation (`ehm_drake.simulation`)
 
 Why here.  The interface is the lowest module that the plant, the diagram
 and the simulation all depend on, so none of them imports upwards (before,
-the plant and the diagram imported `ehm_drake.gap.effects` inside their
+the plant and the diagram imported `ehm_drake.gap.library.effects` inside their
 functions): it imports nothing of the project (the types in the hooks'
 signatures are for documentation only).  The implementations belong to the
-gap diagnosis (`ehm_drake.gap.effects`: each effect's hooks next to its
+gap diagnosis (`ehm_drake.gap.library.effects`: each effect's hooks next to its
 parameters and plausible range) and register themselves when that module
 is imported.  The package's ``__init__``, above both layers, imports it,
 so the candidate effects resolve wherever the model is built; that module

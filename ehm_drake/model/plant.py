@@ -237,7 +237,7 @@ def add_seated_human(
     """Add the plant (+ SceneGraph) of the seated human to `builder`.
 
     `effects` ({name: {parameter: value}}: registered model extensions,
-    the gap diagnosis' candidate effects, see `ehm_drake.gap.effects`)
+    the gap diagnosis' candidate effects, see `ehm_drake.gap.library.effects`)
     extends the model: each extension's plant hooks (`body_options`,
     `modify_body`, `seat_options`, `add_plant_elements`, see
     `ehm_drake.model.extensions`) change the body, the seat and the force

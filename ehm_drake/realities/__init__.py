@@ -7,12 +7,12 @@ nothing of `ehm_drake.model`, `ehm_drake.systems`, `ehm_drake.diagram`,
 `ehm_drake.simulation` or `ehm_drake.params`), with its own structure
 (segmentation, joint, contact and controller laws), its own parameters from
 its own sources, its own subject scatter, and its own implementation of the
-eight candidate effects of `ehm_drake.gap.effects` (same names and meaning,
+eight candidate effects of `ehm_drake.gap.library.effects` (same names and meaning,
 each mapped from a strength in [0, 1] to its own plausible range).
 
 What a reality shares with the rest of the package is only the lab around
 the body: the seat excitation (`ehm_drake.signals.SeatSignal`), the channel
-convention below and, in `ehm_drake.gap.synth`, the measurement chain (sensor
+convention below and, in `ehm_drake.gap.lab.synth`, the measurement chain (sensor
 noise, H1 processing).
 
 Channel convention (what a motion-capture lab reports, as in
@@ -41,7 +41,7 @@ SEGMENTS = ("pelvis", "trunk", "head", "knee_l", "knee_r")
 DOFS = ("x", "y", "z", "roll", "pitch", "yaw")
 CHANNEL_NAMES = tuple(f"{s}_{d}" for s in SEGMENTS for d in DOFS)
 
-#: The model itself (``ehm_drake.gap.synth``'s own simulation).
+#: The model itself (``ehm_drake.gap.lab.synth``'s own simulation).
 MODEL_REALITY = "ehm"
 
 
@@ -113,7 +113,7 @@ class Reality:
 
     def effect_names(self) -> tuple[str, ...]:
         """The candidate effects this reality implements (the own family's
-        `ehm_drake.gap.effects.EFFECT_NAMES`, or a subset)."""
+        `ehm_drake.gap.library.effects.EFFECT_NAMES`, or a subset)."""
         raise NotImplementedError
 
     def prepare(self, subject: dict[str, Any], effects: dict[str, dict[str, float]]) -> Any:

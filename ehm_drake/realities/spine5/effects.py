@@ -1,5 +1,5 @@
 """The eight candidate effects as `spine5` implements them: names and
-meaning as in `ehm_drake.gap.effects`, ranges and laws of this reality's own.
+meaning as in `ehm_drake.gap.library.effects`, ranges and laws of this reality's own.
 
 Each effect maps a strength s in [0, 1] to its parameters; s = 0 is the
 base body exactly (the structural effects add no body at s = 0: their

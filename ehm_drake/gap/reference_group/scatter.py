@@ -2,7 +2,7 @@
 chi^2 of a residual under the group's scatter (the K deviations as a
 low-rank covariance, profiled out in closed form), the bounded descent of a
 candidate's coordinates, and the level-difference design (`_LevelDesign`),
-used by `ehm_drake.gap.reference`."""
+used by `ehm_drake.gap.reference_group.reference`."""
 
 from __future__ import annotations
 

@@ -37,9 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..progress import Progress
-from ..realities import MODEL_REALITY, RealityError
-from .effects import EFFECT_NAMES, EFFECTS
+from ...progress import Progress
+from ...realities import MODEL_REALITY, RealityError
+from ..library.effects import EFFECT_NAMES, EFFECTS
 from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
 
 #: Strength range the blind trials draw from: the upper part of each effect's
@@ -113,18 +113,18 @@ class BlindSpec:
 
     def model_params(self):
         """The run's `ModelParams`, or None for the defaults."""
-        from ..params import params_from_dict
+        from ...params import params_from_dict
 
         return None if self.params is None else params_from_dict(self.params)
 
     def validate(self) -> None:
         if self.trials < 1:
             raise BlindError(f"--trials must be >= 1, got {self.trials}")
-        from .group import MIN_SUBJECTS
+        from ..reference_group.group import MIN_SUBJECTS
         if self.references and self.references < MIN_SUBJECTS:
             raise BlindError(f"--references must be 0 or >= {MIN_SUBJECTS}, got "
                              f"{self.references}")
-        from .contrasts import MIN_CONTRASTS
+        from ..reference_group.contrasts import MIN_CONTRASTS
         if self.contrasts and not MIN_CONTRASTS <= self.contrasts <= self.references:
             raise BlindError(f"--contrasts must be 0 or from {MIN_CONTRASTS} to --references "
                              f"({self.references}): they are the reference subjects measured "
@@ -182,13 +182,13 @@ def detectability(data, key: dict, params=None, measures=None, workers: int | No
 
     from scipy.stats import chi2 as chi2_dist
 
-    from ..identification.parameters import resolve_free
-    from ..model.anthropometry import REFERENCE
-    from ..params import load_params
-    from .diagnose import load_families, load_lab_data, separation_slope
-    from .family import linearize_cut
-    from .localize import SIGNIFICANCE, chi2_rows, localize
-    from .models import Candidate, Predictor, Statics, coordinate, fit_candidate
+    from ...identification.parameters import resolve_free
+    from ...model.anthropometry import REFERENCE
+    from ...params import load_params
+    from ..library.family import linearize_cut
+    from ..library.models import Candidate, Predictor, Statics, coordinate, fit_candidate
+    from ..single.diagnose import load_families, load_lab_data, separation_slope
+    from ..single.localize import SIGNIFICANCE, chi2_rows, localize
 
     params = params if params is not None else load_params()
     measures = measures if measures is not None else REFERENCE
@@ -246,14 +246,14 @@ def twin_detectability(data, twin) -> dict:
     "cells_raw"}}}."""
     from scipy.stats import chi2 as chi2_dist
 
-    from .diagnose import load_lab_data
-    from .localize import SIGNIFICANCE, chi2_rows, localize
+    from ..single.diagnose import load_lab_data
+    from ..single.localize import SIGNIFICANCE, chi2_rows, localize
 
     rows = load_lab_data(data).rows
     ref = load_lab_data(twin).rows
     if len(ref.H) != len(rows.H) or not np.array_equal(ref.freq, rows.freq):
         raise BlindError(f"twin data {twin} do not match {data} row for row")
-    from .discrepancy import SCALE_BOUNDS, Discrepancy
+    from ..single.discrepancy import SCALE_BOUNDS, Discrepancy
 
     def margins(H):
         cells = localize(rows, chi2_rows(rows, H))
@@ -567,7 +567,7 @@ def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | Non
     key.unlink(missing_ok=True)
     synthesize(synth, lab, key, params=params, workers=workers, progress=False)
     if synth.c3d:
-        from ..analysis.lab_c3d import c3d_lab_folder
+        from ...analysis.lab_c3d import c3d_lab_folder
         from .synth_c3d import C3D_FOLDER, MARKER_MAP_FILENAME
 
         c3d_lab_folder([lab / C3D_FOLDER], lab / C3D_FOLDER / MARKER_MAP_FILENAME, data,

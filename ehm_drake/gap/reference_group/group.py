@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .diagnose import DiagnosisError, LabData, load_lab_data
-from .localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize
+from ..single.diagnose import DiagnosisError, LabData, load_lab_data
+from ..single.localize import BANDS, MODEL_FLOOR, Rows, cell_keys, gap_value, localize
 
 #: Fewest reference subjects: the leave-one-out null needs K - 1 >= 3 in
 #: each group it forms, and the scatter's variance needs a few subjects.

@@ -65,11 +65,26 @@ import time
 
 import numpy as np
 
-from ..identification.parameters import resolve_free
-from ..model.anthropometry import REFERENCE, BodyMeasures
-from ..parallel import run_jobs, worker_count
-from ..params import ModelParams, load_params
-from ..progress import Progress
+from ...identification.parameters import resolve_free
+from ...model.anthropometry import REFERENCE, BodyMeasures
+from ...parallel import run_jobs, worker_count
+from ...params import ModelParams, load_params
+from ...progress import Progress
+from ..library.models import STRENGTH_PATH, Candidate, Predictor, Statics, coordinate
+from ..single.diagnose import (
+    Diagnosis,
+    DiagnosisError,
+    LabData,
+    _code_fingerprint,
+    cache_dir,
+    candidate_names,
+    load_families,
+    load_lab_data,
+    scoring_fingerprint,
+    separation_slope,
+)
+from ..single.localize import MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
+from ..single.verdict import AMBIGUITY_MARGIN, family_record, held_back_note
 from .anchor import ANCHOR_ITERATIONS, fit_anchor, write_cache_json
 from .calibration import (
     DEGENERATE_GAIN,
@@ -85,18 +100,6 @@ from .contrasts import (
     find_contrasts,
     load_contrasts,
 )
-from .diagnose import (
-    Diagnosis,
-    DiagnosisError,
-    LabData,
-    _code_fingerprint,
-    cache_dir,
-    candidate_names,
-    load_families,
-    load_lab_data,
-    scoring_fingerprint,
-    separation_slope,
-)
 from .group import (
     RECOMMENDED_SUBJECTS,
     ReferenceGroup,
@@ -105,8 +108,6 @@ from .group import (
     model_form,
     wrap_log,
 )
-from .localize import MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
-from .models import STRENGTH_PATH, Candidate, Predictor, Statics, coordinate
 from .scatter import (
     DESCENT_EVALUATIONS,
     _descend,
@@ -114,7 +115,6 @@ from .scatter import (
     profile_nuisance,
     scatter_residual,
 )
-from .verdict import AMBIGUITY_MARGIN, family_record, held_back_note
 
 #: Where each candidate's fit starts: its strength path (fractions of the
 #: model's plausible range, `models.STRENGTH_PATH`) and "off"; for a

@@ -42,7 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .diagnose import DiagnosisError, candidate_names, load_lab_data
+from ..single.diagnose import DiagnosisError, candidate_names, load_lab_data
+from ..single.localize import BANDS, Rows, cell_keys
 from .group import (
     ReferenceGroup,
     expand_reference_paths,
@@ -50,7 +51,6 @@ from .group import (
     smooth_over_frequency,
     wrap_log,
 )
-from .localize import BANDS, Rows, cell_keys
 from .scatter import _LevelDesign
 
 #: Contrast subjects an effect needs: the leave-one-out null of a group

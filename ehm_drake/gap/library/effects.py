@@ -72,7 +72,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..model.extensions import ModelExtension, register_extension, validate_extensions
+from ...model.extensions import ModelExtension, register_extension, validate_extensions
 
 
 @dataclass(frozen=True)
@@ -369,7 +369,7 @@ class VisceralMass(CandidateEffect):
 def cocontraction_gains(params, layout) -> np.ndarray:
     """Active stiffness kp per rotational DoF that co-contraction scales
     (trunk, neck and hip DoFs; 0 elsewhere)."""
-    from ..model.plant import pid_vectors
+    from ...model.plant import pid_vectors
 
     kp = pid_vectors(params, layout)["kp"]
     return np.where([g in COCONTRACTION_GROUPS for g in layout.groups], kp, 0.0)
@@ -387,7 +387,7 @@ class Cocontraction(CandidateEffect):
     of active stiffness; a run starts adapted to its signal's level."""
 
     def add_force_systems(self, parts) -> list:
-        from ..systems.joints import CoContraction
+        from ...systems.joints import CoContraction
 
         layout = parts.hp.layout
         cc = parts.add_system(self.name, CoContraction(
@@ -429,7 +429,7 @@ class SeatCushionDynamics(CandidateEffect):
         from pydrake.math import RigidTransform
         from pydrake.multibody.tree import FixedOffsetFrame, LinearBushingRollPitchYaw
 
-        from ..model.plant import NOMINAL_LOAD_SHARE
+        from ...model.plant import NOMINAL_LOAD_SHARE
 
         if not self.values["mass_kg"] > 0:
             return
@@ -471,9 +471,9 @@ class Softening(CandidateEffect):
     their muscle tension: Matsumoto & Griffin 2002, J Sound Vib 253(1):77-92)."""
 
     def add_force_systems(self, parts) -> list:
-        from ..model.restraints import restraint_points
-        from ..model.softening import TISSUE_PAIRS, ElementSet
-        from ..systems.softening import BodySoftening
+        from ...model.restraints import restraint_points
+        from ...model.softening import TISSUE_PAIRS, ElementSet
+        from ...systems.softening import BodySoftening
 
         r = self.values["extra_loss"]
         if not r > 0:

@@ -66,20 +66,31 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
-from ..analysis.formats import (
+from ...analysis.formats import (
     DataFormatError,
     FrfData,
     find_test_timeseries,
     read_frf,
     read_timeseries,
 )
-from ..identification.parameters import resolve_free
-from ..model.anthropometry import REFERENCE, BodyMeasures
-from ..parallel import run_jobs, worker_count
-from ..params import ModelParams, load_params
-from ..progress import Progress
-from .effects import EFFECT_NAMES, EFFECTS
-from .family import build_families, linearize_cut, static_penetrations
+from ...identification.parameters import resolve_free
+from ...model.anthropometry import REFERENCE, BodyMeasures
+from ...parallel import run_jobs, worker_count
+from ...params import ModelParams, load_params
+from ...progress import Progress
+from ..library.effects import EFFECT_NAMES, EFFECTS
+from ..library.family import build_families, linearize_cut, static_penetrations
+from ..library.models import (
+    GRID_EFFECTS,
+    Candidate,
+    Predictor,
+    Statics,
+    TestInput,
+    coordinate,
+    family_of,
+    family_specs,
+    fit_candidate,
+)
 from .localize import (
     BANDS,
     Rows,
@@ -90,17 +101,6 @@ from .localize import (
     localize,
     mark_after,
     rows_from_frf,
-)
-from .models import (
-    GRID_EFFECTS,
-    Candidate,
-    Predictor,
-    Statics,
-    TestInput,
-    coordinate,
-    family_of,
-    family_specs,
-    fit_candidate,
 )
 from .verdict import AMBIGUITY_MARGIN, EXPLAINED_REDUCTION, decide, explain
 
@@ -137,7 +137,7 @@ def load_lab_data(path, channels: str = "plane") -> LabData:
     """Measured data: a folder with frf.csv (every test, with level_rms),
     optionally tests.json and per-test time series (<d>_<level>/
     timeseries.csv); or a folder with one timeseries.csv; or an frf.csv."""
-    from ..analysis.transmissibility import transmissibility
+    from ...analysis.transmissibility import transmissibility
 
     path = Path(path)
     notes = []
@@ -205,19 +205,21 @@ def _sources_fingerprint(files) -> str:
 def _code_fingerprint() -> str:
     """Hash of the sources the linear families depend on (a cached family
     from other model code is never reused)."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
+    library = root / "gap" / "library"
     return _sources_fingerprint(sorted([
         *root.glob("model/*.py"), *root.glob("systems/*.py"), root / "diagram.py",
-        root / "params.py", root / "gap" / "family.py", root / "gap" / "effects.py",
+        root / "params.py", library / "family.py", library / "effects.py",
         root / "simulation.py", root / "analysis" / "linear.py"]))
 
 
 def scoring_fingerprint() -> str:
     """Hash of the sources that score a candidate on a residual (cached
     reference-group thresholds from other scoring code are never reused)."""
-    here = Path(__file__).resolve().parent
-    return _sources_fingerprint(here / n for n in ("models.py", "group.py", "reference.py",
-                                                   "scatter.py", "localize.py"))
+    gap = Path(__file__).resolve().parents[1]
+    return _sources_fingerprint(gap / n for n in (
+        "library/models.py", "reference_group/group.py", "reference_group/reference.py",
+        "reference_group/scatter.py", "single/localize.py"))
 
 
 def _family_key(params: ModelParams, measures: BodyMeasures, base_names, spec) -> str:
@@ -265,7 +267,7 @@ def _load_or_build(specs, cdir, params, measures, base_names, workers, progress,
                 with open(path, "rb") as f:
                     out[sp.name] = pickle.load(f)
                 continue
-            except (OSError, pickle.UnpicklingError, EOFError, AttributeError):
+            except (OSError, pickle.UnpicklingError, EOFError, AttributeError, ImportError):
                 pass
         todo.append((sp, path))
     if todo:
@@ -453,8 +455,8 @@ def _ranking_entry(name, res, base, n_base, n_rows, base_names, keys) -> dict:
 def separating_experiment(best: dict, other: dict, state: dict) -> dict:
     """The test (direction, level) and channel/band where the fitted models
     of two candidates differ most, in units of a 3% measurement."""
+    from ..library.models import TestInput as TI
     from .localize import MODEL_FLOOR, band_index
-    from .models import TestInput as TI
 
     rows = state["rows"]
     f = np.arange(1, 121) * 0.1
@@ -467,7 +469,7 @@ def separating_experiment(best: dict, other: dict, state: dict) -> dict:
         fam = family_of(state, res["effect"])
         tests = [TI.flat(d, lv) for d in "xyz" for lv in levels]
         # Synthetic rows: every plane channel at f, for each test.
-        from ..systems.outputs import CHANNEL_NAMES
+        from ...systems.outputs import CHANNEL_NAMES
         from .localize import PLANE_CHANNELS
         recs = []
         for t in tests:

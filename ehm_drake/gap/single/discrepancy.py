@@ -45,8 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..library.models import BASE_PRIOR_SIGMA, Candidate, Predictor, Statics, family_of, row_sigma
 from .localize import BANDS, cell_keys, chi2_rows, delta_bic, gap_value, mark_after
-from .models import BASE_PRIOR_SIGMA, Candidate, Predictor, Statics, family_of, row_sigma
 
 #: Hat functions in log-frequency over 0.1-12 Hz.
 KNOTS = 6
@@ -271,8 +271,8 @@ def structural_pass(state: dict, first: dict, names, workers, progress) -> dict:
     """Run the structural pass over 'none' and `names` (after the ordinary
     pass `first`: candidate name -> result).  Returns the structural part of
     the report (see module doc)."""
-    from ..parallel import run_jobs, worker_count
-    from ..progress import Progress
+    from ...parallel import run_jobs, worker_count
+    from ...progress import Progress
 
     rows = state["rows"]
     keys = cell_keys(rows)

@@ -31,8 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from ..analysis.formats import FrfData
-from ..systems.outputs import CHANNEL_NAMES
+from ...analysis.formats import FrfData
+from ...systems.outputs import CHANNEL_NAMES
 
 BANDS = ((0.1, 1.0), (1.0, 2.5), (2.5, 5.0), (5.0, 8.0), (8.0, 12.0))
 MODEL_FLOOR = 0.03

@@ -39,13 +39,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..analysis.linear import FD_STEP, INPUT_FD_STEP, _linearize_fd
-from ..diagram import build_diagram
-from ..model.anthropometry import REFERENCE, BodyMeasures
-from ..model.extensions import equilibrium_effects
-from ..parallel import run_jobs
-from ..params import ModelParams, params_from_dict
-from ..systems.seat import restraint_block
+from ...analysis.linear import FD_STEP, INPUT_FD_STEP, _linearize_fd
+from ...diagram import build_diagram
+from ...model.anthropometry import REFERENCE, BodyMeasures
+from ...model.extensions import equilibrium_effects
+from ...parallel import run_jobs
+from ...params import ModelParams, params_from_dict
+from ...systems.seat import restraint_block
 from .effects import COCONTRACTION_GROUPS
 
 GAP_OUTPUTS = ("channels", "restraint_normal_displacement", "restraint_deflection")
@@ -111,7 +111,7 @@ class CutLinearization:
 def _prepare(params: ModelParams, measures: BodyMeasures, effects: dict):
     """The cut-open diagram at the static equilibrium: (model, context,
     state map)."""
-    from ..simulation import StateMap, set_normal_reference, static_equilibrium
+    from ...simulation import StateMap, set_normal_reference, static_equilibrium
 
     closed = build_diagram(params, measures, None, guard=False, seat_forces=False,
                            effects=_without_delay(effects))
@@ -262,7 +262,7 @@ def _job_base_parameter(args):
     its own static equilibrium (the PID integrals and restraint slips then
     carry the same static loads: at a foreign equilibrium state the static
     joint torques would differ, and with them the geometric stiffness)."""
-    from ..identification.parameters import apply_scales, load_registry
+    from ...identification.parameters import apply_scales, load_registry
 
     params_dict, measures, effects, name, step = args
     registry, _ = load_registry()
@@ -615,8 +615,8 @@ def seat_displacement_per_acceleration(freqs_hz, h: float) -> np.ndarray:
 def to_transmissibility(H_channels: np.ndarray, freqs_hz, h: float, directions: str):
     """Channel responses per m/s^2 (nf, 30, ndir) -> transmissibility (m/m,
     deg/m; absolute translations) as in `LinearModel.transmissibility_array`."""
-    from ..analysis.linear import _ROT_MASK
-    from ..systems.outputs import CHANNEL_NAMES
+    from ...analysis.linear import _ROT_MASK
+    from ...systems.outputs import CHANNEL_NAMES
 
     T = H_channels / seat_displacement_per_acceleration(freqs_hz, h)[:, None, None]
     for j, d in enumerate(directions):

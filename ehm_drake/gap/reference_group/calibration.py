@@ -10,7 +10,7 @@ import math
 import numpy as np
 from scipy.stats import t as student_t
 
-from .diagnose import DiagnosisError
+from ..single.diagnose import DiagnosisError
 
 #: The chance that a subject without any effect has one named (family-wise,
 #: over the candidates scored): the false-alarm bar of the validation (10%),

@@ -16,12 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..identification.parameters import apply_scales, resolve_free, scale_bounds
-from ..model.anthropometry import BodyMeasures
-from ..params import ModelParams
-from .diagnose import _code_fingerprint, cache_dir, load_families, separation_slope
-from .localize import MODEL_FLOOR
-from .models import Candidate, Predictor, Statics, fit_candidate, residuals
+from ...identification.parameters import apply_scales, resolve_free, scale_bounds
+from ...model.anthropometry import BodyMeasures
+from ...params import ModelParams
+from ..library.models import Candidate, Predictor, Statics, fit_candidate, residuals
+from ..single.diagnose import _code_fingerprint, cache_dir, load_families, separation_slope
+from ..single.localize import MODEL_FLOOR
 
 #: Re-linearized iterations of the anchor fit.  The cost changed by < 1% in
 #: the last of 4 on one `lumped` group of 8 (288k, 250k, 239k, 237k); on the

@@ -50,15 +50,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.formats import FrfData, TimeSeriesData, write_test_list
-from ..analysis.transmissibility import transmissibility
-from ..identification.parameters import apply_scales, representative, resolve_free
-from ..model.anthropometry import REFERENCE
-from ..parallel import run_jobs
-from ..params import ModelParams, params_from_dict
-from ..progress import Progress
-from ..realities import CHANNEL_NAMES, MODEL_REALITY, RealityError, get_reality
-from .effects import EFFECTS, effect_values, reflex_delay_steps
+from ...analysis.formats import FrfData, TimeSeriesData, write_test_list
+from ...analysis.transmissibility import transmissibility
+from ...identification.parameters import apply_scales, representative, resolve_free
+from ...model.anthropometry import REFERENCE
+from ...parallel import run_jobs
+from ...params import ModelParams, params_from_dict
+from ...progress import Progress
+from ...realities import CHANNEL_NAMES, MODEL_REALITY, RealityError, get_reality
+from ..library.effects import EFFECTS, effect_values, reflex_delay_steps
 
 DEFAULT_LEVELS = (0.3, 0.6)
 DEFAULT_DURATION_S = 60.0
@@ -171,8 +171,8 @@ def _truth(name: str, strength: float, h: float) -> dict:
 def _run_test(args):
     """One lab test: simulate, add sensor noise, H1.  Returns (FrfData,
     TimeSeriesData, wall seconds, real-time factor)."""
-    from ..signals import make_seat_signal
-    from ..simulation import vibrate
+    from ...signals import make_seat_signal
+    from ...simulation import vibrate
 
     params_dict, effects, settled, direction, level, duration, seed, c3d = args
     params = params_from_dict(params_dict)
@@ -218,7 +218,7 @@ def _run_reality_test(args):
     """One lab test on an independent reality: its record of the steady
     part, sampled at the lab rate, through `_measure`.  Same return as
     `_run_test`."""
-    from ..signals import make_seat_signal
+    from ...signals import make_seat_signal
 
     name, prepared, direction, level, duration, seed, c3d = args
     reality = get_reality(name)
@@ -265,8 +265,8 @@ def _check_outputs(out_dir: Path, key_path: Path) -> None:
 def synthesize(spec: SynthSpec, out_dir, key_path, params: ModelParams | None = None,
                workers: int | None = None, progress: bool = True) -> SynthResult:
     """Simulate the lab tests of `spec` and write the data folder and key."""
-    from ..params import load_params
-    from ..simulation import settle
+    from ...params import load_params
+    from ...simulation import settle
 
     spec.validate()
     out_dir, key_path = Path(out_dir), Path(key_path)
@@ -357,8 +357,8 @@ def _write_sessions(out_dir: Path, tests: list, sessions: list) -> None:
     """The tests' C3D sessions and the lab's marker map into out_dir/c3d."""
     import shutil
 
-    from ..analysis.formats.c3d import write_c3d
-    from ..analysis.marker_map import EXAMPLE_MARKER_MAP
+    from ...analysis.formats.c3d import write_c3d
+    from ...analysis.marker_map import EXAMPLE_MARKER_MAP
     from .synth_c3d import C3D_FOLDER, MARKER_MAP_FILENAME
 
     folder = out_dir / C3D_FOLDER

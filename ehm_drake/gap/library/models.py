@@ -50,8 +50,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ..model.softening import equivalent_loss, loss_fraction, tissue_element_set
-from ..params import params_from_dict
+from ...model.softening import equivalent_loss, loss_fraction, tissue_element_set
+from ...params import params_from_dict
+from ..single.localize import Rows
 from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, EffectParam
 from .family import (
     GROUP_NAMES,
@@ -61,7 +62,6 @@ from .family import (
     response,
     to_transmissibility,
 )
-from .localize import Rows
 
 #: Effects that add bodies/joints (linearized over a grid of their
 #: parameters) and their grids (parameter values per axis).

@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..analysis.formats import TimeSeriesData
-from ..analysis.formats.c3d import C3DSession
-from ..analysis.marker_map import EXAMPLE_MARKER_MAP, load_marker_map
+from ...analysis.formats import TimeSeriesData
+from ...analysis.formats.c3d import C3DSession
+from ...analysis.marker_map import EXAMPLE_MARKER_MAP, load_marker_map
 
 __all__ = ["MARKER_NOISE_M", "MARKER_DROPOUT", "FRAME_DROPOUT", "virtual_session",
            "MARKER_MAP_FILENAME", "C3D_FOLDER"]

@@ -1,0 +1,1 @@
+"""Simulated laboratories: synthetic data with hidden effects and the blind check."""

@@ -1,0 +1,1 @@
+"""The gap diagnosis against a reference group of subjects."""

@@ -1,0 +1,1 @@
+"""One subject's gap diagnosis: the ordinary pass and the structural pass."""
