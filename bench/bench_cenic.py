@@ -1,6 +1,5 @@
 """Discrete SAP step against a continuous plant on Drake's error-controlled
-`cenic` integrator (issue "Ten to twenty times real time": keep the faster
-design that meets the accuracy bar).
+`cenic` integrator (to keep the faster design that meets the accuracy bar).
 
     python bench/bench_cenic.py [--design implicit|reference] [--duration 1]
         [--accuracies 1e-2,1e-3]

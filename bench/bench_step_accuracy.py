@@ -26,8 +26,8 @@ design's own run at 1 ms (its step error alone), the worst bin's channel,
 and the paper's posture fact (head pitch after settling; the no-integrator
 variant drifts 6.4 +- 1 deg in the paper).
 
-The acceptance bar of the implicit design (issue "Ten to twenty times real
-time"): median <= 2 %, worst bin <= 10 % against the 1 ms reference.  The 1
+The accuracy bar of the implicit design: median <= 2 %, worst bin <= 10 %
+against the 1 ms reference.  The 1
 ms reference is itself first-order in its step; the converged columns say
 which of the two is the accurate one.
 """

@@ -43,7 +43,7 @@ gain).  Per part: its chi^2 at the three delays, its share along the
 reality's effect (mean best cos^2) and the reach of the base directions
 with its signatures added.
 
-    python bench/effect_atlas.py /work/runs/spine5_s2038 [--out atlas.json]
+    python bench/effect_atlas.py BLIND_RUN_DIR [--out atlas.json]
         [--reference DIR ...] [--span passive,pid,his,contact,restraints]
         [--delay-parts]
 

@@ -4,12 +4,13 @@ without any effect: the measured level of `calibration.null_threshold`.
 Every no-effect trial of a blind run against a reference group carries, per
 candidate, its evidence and the leave-one-out gains of the run's group (the
 null its threshold is set from).  This script collects them from one or
-more runs, judges them with each candidate's own bound and with the cube-root bound's gains
-clipped at -MIN_GAIN instead of 0 (tried at stop 44), and prints the per-candidate exceedance
-rate against its nominal level (FAMILY_ALPHA / candidates) and the share of
-subjects with any candidate named (the false-alarm rate); then that share
-with the library's thresholds, the bounds and the family-wise conformal test
-(`calibration.thresholds`, stop 55):
+more runs, judges them with each candidate's own bound and with the cube-root
+bound's gains clipped at -MIN_GAIN instead of 0 (an alternative once tried),
+and prints the per-candidate exceedance rate against its nominal level
+(FAMILY_ALPHA / candidates) and the share of subjects with any candidate
+named (the false-alarm rate); then that share with the library's
+thresholds, the bounds and the family-wise conformal test
+(`calibration.thresholds`):
 
     python bench/null_calibration.py RUN [RUN ...] [--out nulls.json]
 
@@ -19,8 +20,8 @@ wrote when it diagnosed a run's trials again (e.g. against another group,
 
 `--out` writes the collected values (per run: the candidates' null gains
 and the borrowed spread; per subject: each candidate's evidence), the form
-`tests/data/lumped_null_evidence.json` is stored in (`lumped` seeds 2041,
-2043-2046, 68 no-effect subjects, stop 44).
+`tests/data/lumped_null_evidence.json` is stored in (five `lumped` blind
+runs, 68 no-effect subjects; docs/history).
 """
 
 from __future__ import annotations
@@ -127,7 +128,7 @@ def family_named(data: dict) -> dict:
 
 def clipped_at(clip: float):
     """`calibration.null_threshold` with the cube-root bound's gains clipped
-    at `clip` (the library's default is 0; stop 44 tried -MIN_GAIN): a
+    at `clip` (the library's default is 0; -MIN_GAIN is the alternative once tried): a
     threshold(null, n_candidates, borrowed_spread)."""
     from ehm_drake.gap.reference_group.calibration import null_threshold
 
@@ -154,7 +155,7 @@ def main(argv=None) -> int:
     nominal = FAMILY_ALPHA / max(n_cand)
     print(f"{sum(len(e['evidence']) for e in data.values())} no-effect subjects in "
           f"{len(data)} runs; nominal per-candidate level {nominal:.4f}")
-    for label, m in (("per-candidate bound", current), ("clipped at -MIN_GAIN (stop 44)", other)):
+    for label, m in (("per-candidate bound", current), ("clipped at -MIN_GAIN", other)):
         rate = m["exceedances"] / m["tests"]
         print(f"{label:28s} per candidate {m['exceedances']}/{m['tests']} = {rate:.4f} "
               f"({rate / nominal:.2f} x nominal); subjects named {m['named']}/{m['subjects']} "

@@ -28,7 +28,7 @@ With ``--reference DIR [DIR ...]`` the trials are diagnosed against the
 reference subjects in those folders (a run's ``reference`` folder, or subject
 folders) instead of the run's own group: a change of the group (its size, its
 subjects) measured on the same trials, e.g. the run's 8 subjects and another
-run's 8 of the same reality and protocol (stop 45).
+run's 8 of the same reality and protocol.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ there (the issue's false-alarm assertion).
 Vertical tests at two levels, 30 s records, three candidates (as the
 own-family short run in test_gap_blind.py); seed 21 draws a no-effect trial
 first.  Without a reference group a hidden effect is not found beyond the
-model-form gap (docs/gap_diagnosis_realities.md): the issue's assertions
+model-form gap (docs/history/gap-diagnosis-on-realities.md): the issue's assertions
 with an effect (top-1, top-3, the twin check) run on the short blind run
 against a reference group, `tests/test_gap_reference.py`, which draws the
 same no-effect subject first.

@@ -779,7 +779,7 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     K = 16; at K = 16 each candidate exceeds its threshold 2 times in 336
     (0.48 times the nominal level; at most the nominal level asserted, and
     not by refusing every effect).  What `group.RECOMMENDED_SUBJECTS` rests
-    on, with the hits (docs/gap_diagnosis_realities.md, "A group of 16")."""
+    on, with the hits (docs/history/gap-diagnosis-on-realities.md, "A group of 16")."""
     from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, null_threshold
 
     nc = _bench("null_calibration")
@@ -1086,7 +1086,7 @@ def test_the_family_wise_test_on_measured_no_effect_subjects():
     (`calibration.thresholds`): 1 of 30, 0 of 68, 0 of 42 with stop 55's
     scales, 0 of 30, 1 of 68, 0 of 42 with the runner-up scales of stop 56
     (both rules chosen after the `spine5` runs were seen, so this is a
-    record, not a blind confirmation: docs/gap_diagnosis_realities.md)."""
+    record, not a blind confirmation: docs/history/gap-diagnosis-on-realities.md)."""
     from ehm_drake.gap.reference_group.calibration import thresholds
 
     nc = _bench("null_calibration")

@@ -107,3 +107,22 @@ def test_the_python_example_runs_and_gives_a_vertical_apparent_mass():
     # At 1 m/s^2 the apparent mass rises from about 1 at 2 Hz to its 4-6 Hz resonance.
     modulus = scope["modulus"]
     assert 0.9 < modulus[0] < 1.1 and modulus[1] > 1.1 and modulus[2] > 1.1
+
+
+def _user_facing_files():
+    """What users read besides the README: the package (docstrings, help, report texts),
+    the benchmarks, the notebooks and the documentation outside its history."""
+    for folder, pattern in (("ehm_drake", "*.py"), ("bench", "*.py"), ("notebooks", "*.ipynb"),
+                            ("docs", "*.md")):
+        for p in sorted((ROOT / folder).rglob(pattern)):
+            rel = p.relative_to(ROOT).as_posix()
+            if not rel.startswith(("docs/history/", "docs/_build/", "docs/tutorials/")):
+                yield rel, p.read_text()
+
+
+def test_working_log_words_live_only_in_the_history():
+    """Which session, which seed of which run: docs/history, dated; never where a user
+    reads how the tool works."""
+    hits = [(rel, m.group(0)) for rel, text in _user_facing_files() for pattern in LOG_WORDS
+            for m in re.finditer(pattern, text, flags=re.IGNORECASE)]
+    assert not hits, hits[:10]

@@ -390,7 +390,7 @@ def seat_sdf(body: Body, cushion_mass_kg: float = 0.0) -> str:
         # ellipsoids touch the faces well inside their edges in every
         # posture, where the two are the same surface; the half-space's
         # penetration is closed-form, the box's FCL's GJK/EPA: with the
-        # excitation in C++, a step 2-3% fewer instructions (docs/speed.md).
+        # excitation in C++, a step 2-3% fewer instructions (docs/history/speed.md).
         normal = SEAT_PARTS[name][0]
         face = np.asarray(c, float) + 0.5 * (np.asarray(size, float) @ normal) * normal
         target += [

@@ -23,7 +23,7 @@ plant's own configuration.  (In a first version they acted on the ball joints'
 angular-velocity coordinates: the same at the reference posture, but a
 joint holding a static torque -- the integral action under the body's
 weight -- got a stiffness ~10% off in yaw and roll, and the two designs
-differed by up to 4.6% in transmissibility; see docs/speed.md, "Two designs".)
+differed by up to 4.6% in transmissibility; see docs/history/speed.md, "Two designs".)
 
 Both are template systems (`TemplateSystem`; float, AutoDiffXd).
 """

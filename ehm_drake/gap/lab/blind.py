@@ -58,11 +58,10 @@ IMPOSABLE_EFFECTS = ("arms", "cocontraction", "backrest_separation", "seat_cushi
 #: Strength of an imposed effect in a contrast: one known condition, the
 #: middle of the trials' range (`DETECTABLE_STRENGTH`).
 CONTRAST_STRENGTH = 0.8
-#: Acceptance of the issue (fractions) on data made by the model itself.
+#: The bar of a blind run (fractions) on data made by the model itself.
 ACCEPTANCE = {"top1": 0.80, "top3": 0.95, "false_alarm": 0.10, "heldout_reduction": 0.70}
-#: Acceptance on an independent reality (issue "Gap diagnosis on data from a
-#: body that is not the model"): no held-out share required, at least 30
-#: scored trials.
+#: The bar on an independent reality (a body that is not the model): no
+#: held-out share required, at least 30 scored trials.
 ACCEPTANCE_REALITY = {"top1": 0.75, "top3": 0.90, "false_alarm": 0.10,
                       "heldout_reduction": None, "trials": 30}
 

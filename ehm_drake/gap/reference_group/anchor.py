@@ -24,8 +24,8 @@ from ..single.diagnose import _code_fingerprint, cache_dir, load_families, separ
 from ..single.localize import MODEL_FLOOR
 
 #: Re-linearized iterations of the anchor fit.  The cost changed by < 1% in
-#: the last of 4 on one `lumped` group of 8 (288k, 250k, 239k, 237k); on the
-#: `lumped` seed-2026 blind run's group the 3 end at 501k, 444k and 427k
+#: the last of 4 on one `lumped` group of 8 (288k, 250k, 239k, 237k); on
+#: another `lumped` blind run's group the 3 end at 501k, 444k and 427k
 #: (from 684k; the last 4%, several scales at their bounds).
 ANCHOR_ITERATIONS = 3
 #: Version of the cached anchors' content (its key before the move from

@@ -22,8 +22,8 @@ MIN_GAIN = 16.3
 #: A candidate's null is degenerate when every reference subject's gain is
 #: within this of 0 (its fit stays "off" up to round-off; the blind run's
 #: scoring gives such a candidate no rank either): its threshold then
-#: borrows the group's typical spread (`null_threshold`).  On `spine5`'s
-#: seed-2034 group the separation's null was 8 exact zeros, its threshold
+#: borrows the group's typical spread (`null_threshold`).  On one `spine5`
+#: group the separation's null was 8 exact zeros, its threshold
 #: `MIN_GAIN`, and a no-effect subject was named with a gain of 180.
 DEGENERATE_GAIN = 1.0
 
@@ -150,7 +150,7 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
     Why: the per-candidate bounds assume a distribution of the gains, and
     the nulls of a body that is not the model are mixtures -- most subjects
     0 (the fit stays "off"), a few far above -- whose tails no bound from K
-    values captures: on `spine5`'s seed-2061 group of 16 they let 6 of 30
+    values captures: on one `spine5` group of 16 they let 6 of 30
     fresh no-effect subjects have an effect named (20%).  The threshold
     reported is max(bound, scale x k-th score): the evidence must exceed
     it.  It depends on the subject's evidence (through the scales), so it

@@ -12,7 +12,7 @@ that are not the model: on the stored blind runs the effects missed carried
 enough change to pass every threshold had a candidate followed them (a perfect
 signature would have scored 3-60 times the family-wise bar on `lumped` seed
 2062's 13 misses), but the EHM's own versions of arms, co-contraction, visceral
-mass and reflex delay act elsewhere (docs/gap_diagnosis_realities.md).
+mass and reflex delay act elsewhere (docs/history/gap-diagnosis-on-realities.md).
 
 Layout: a folder ``contrasts/<effect>/<subject>/`` (frf.csv or timeseries.csv,
 as a subject folder), where ``<effect>`` is a candidate's name and ``<subject>``
@@ -66,7 +66,7 @@ CONTRASTS_FOLDER = "contrasts"
 #: ~1 Hz (the body's half-power bandwidths 2 zeta f: 1-3 Hz for the 4-6 Hz
 #: vertical mode, zeta 0.2-0.4).  On the stored groups' contrasts the
 #: subjects' agreement rises from 0.06-0.84 per bin to 0.25-0.96 at 0.9 Hz
-#: (docs/gap_diagnosis_realities.md).  0: none.
+#: (docs/history/gap-diagnosis-on-realities.md).  0: none.
 SIGNATURE_SMOOTHING_HZ = 0.9
 #: Below this agreement (see `contrast_quality`) an effect's contrasts are
 #: said to disagree: their common change is weaker than what differs

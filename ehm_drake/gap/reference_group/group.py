@@ -27,7 +27,7 @@ MIN_SUBJECTS = 4
 #: diagnosed against their run's 8 subjects and against those 8 plus 8 of
 #: another run of the same protocol: an effect named on 7 of 42 no-effect
 #: subjects against 8, on 2 against 16; hidden effects found in 35 of 51
-#: trials against 43 (docs/gap_diagnosis_realities.md, "A group of 16").
+#: trials against 43 (docs/history/gap-diagnosis-on-realities.md, "A group of 16").
 RECOMMENDED_SUBJECTS = 16
 #: Bins of the running mean of the group's variance per channel (a variance
 #: from K subjects is itself scattered by sqrt(2 / (K - 1)) ~ 50% at K = 8).

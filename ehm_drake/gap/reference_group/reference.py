@@ -127,9 +127,9 @@ from .scatter import (
 #: `EQUIVALENT_TOL` for the descent's first difference), so no descent from
 #: "off" reaches it.  A linear or delay candidate's signature is smooth at
 #: "off", so the descent from there (`_descend`) reaches weak strengths
-#: itself; weak starts for them only add local minima (on the lumped
-#: reality's blind seed 2032 they fitted 3-4 ms reflex delays on four trials
-#: where the path's starts found none, one of them that run's false alarm).
+#: itself; weak starts for them only add local minima (on a blind run of the
+#: lumped reality they fitted 3-4 ms reflex delays on four trials where the
+#: path's starts found none, one of them that run's false alarm).
 WEAK_STRENGTHS = (0.01, 0.03, 0.1)
 #: A candidate's fit is flat along its strength path when the costs of the
 #: starts differ by less than this fraction.
@@ -330,8 +330,8 @@ def _evidence(res: dict, base: dict) -> float:
     response only as far as the level does, so its fit to all rows predicts
     level differences.  Where the subject does not show them
     (``level_gain_at_fit`` < 0) it mimics a level-independent difference,
-    and that loss is taken off its evidence, down to zero.  On `spine5`'s
-    seed 2037 friction's all-rows fits lose 2,765-4,416 there on the 5
+    and that loss is taken off its evidence, down to zero.  On a blind run
+    of `spine5`, friction's all-rows fits lose 2,765-4,416 there on the 5
     trials it was wrongly named on and gain 3,358-11,170 on true friction;
     a separation's fit loses 70,000 on true separations (left out)."""
     e = _gain(res, base) + float(res.get("level_gain", 0.0))
@@ -525,7 +525,7 @@ def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, li
     The candidates beyond their null come first, ordered by how far their
     evidence exceeds their own threshold; the others follow by evidence.
     Held-out gains of different candidates are not on one scale under the
-    null: on `lumped` seed 2046's group (with per-candidate bounds alone)
+    null: on one `lumped` group (with per-candidate bounds alone)
     `seat_cushion_dynamics` reaches a threshold of 318 on subjects without
     any effect, `reflex_delay` 68, and a reflex delay gaining 243 (3.6 times
     its bar) lost to the cushion's 369 (1.2 times) when the largest evidence

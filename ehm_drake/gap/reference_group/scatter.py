@@ -27,7 +27,7 @@ class _LevelDesign:
     A subject's structural difference from the group is nearly the same at
     both levels, so it cancels here, while a level-dependent effect
     (co-contraction, foam stiffening, friction, a separation) does not: on
-    `spine5`'s seed-2035 trials the co-contraction's gain is 570-1,070 here
+    one blind run of `spine5` the co-contraction's gain is 570-1,070 here
     against 0-6 on the group's own subjects, where on all rows it was
     -18 to 146 against a threshold of 314."""
 

@@ -36,7 +36,7 @@ Procedure (`diagnose`):
    That p-value is nominal: the bins of a cell are correlated (Welch
    averaging), so on no-effect data it falls to 1e-8; the half of the
    held-out gap is the guard (no-effect and undetectable trials of the
-   own-family blind run, seed 2026: at most 40%).
+   own-family blind run: at most 40%).
 5. The model-form gap (`discrepancy`): when no candidate explains it, a
    smooth discrepancy per direction and channel, shared by the levels, with
    its scale estimated from the data, is fitted; if it removes at least half

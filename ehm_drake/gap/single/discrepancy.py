@@ -59,7 +59,7 @@ SCALE_BOUNDS = (0.03, 1.0)
 STRUCTURAL_SHARE = 0.5
 #: An effect is named when it removes this share of the held-out gap left
 #: beyond the discrepancy.  On no-effect data of the independent realities
-#: the best of the candidates removed at most 6% (docs/gap_diagnosis_realities.md,
+#: the best of the candidates removed at most 6% (docs/history/gap-diagnosis-on-realities.md,
 #: "Independent realities"); 15% leaves a margin of 2.5.
 EXPLAINED_BEYOND = 0.15
 
