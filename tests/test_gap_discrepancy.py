@@ -185,3 +185,53 @@ def test_scoring_on_a_reality_counts_named_effects_not_the_model_form_gap():
     rep.update(verdict="explained", best_effect="arms")
     assert score({}, rep, None, reality=True)["false_alarm"]
     assert score({"arms": 1.0}, rep, True, reality=True)["top1"]
+
+
+def _bench(name: str):
+    """`bench/{name}.py`, imported (a script, not a module of the package)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
+    """`bench/single_subject_null.py` on a blind run of ten no-effect subjects:
+    the structural statistic is the largest reduction among candidates with a
+    negative delta BIC, the rate is the share named, and the threshold names
+    at most alpha of the subjects."""
+    import json
+
+    bench = _bench("single_subject_null")
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "blind_settings.json").write_text(json.dumps({"reality": "lumped", "references": 0}))
+    beyond = [0.02, 0.05, 0.08, 0.30, 0.11, 0.0, 0.04, 0.19, 0.07, 0.01]
+    for i, b in enumerate(beyond):
+        t = run / f"trial_{i:03d}"
+        (t / "diagnosis").mkdir(parents=True)
+        (t / "result.json").write_text(json.dumps({"trial": i, "hidden": {}}))
+        named = b >= EXPLAINED_BEYOND
+        ranking = [{"effect": "arms", "delta_bic": -5.0, "reduction_beyond": b},
+                   {"effect": "softening", "delta_bic": 40.0, "reduction_beyond": 0.9}]
+        (t / "diagnosis" / "report.json").write_text(json.dumps({
+            "verdict": "explained" if named else "structural",
+            "best_effect": "arms" if named else None, "ranking": [],
+            "structural": {"ran": True, "ranking": ranking}}))
+    # A trial with a hidden effect is not a null subject.
+    t = run / "trial_999"
+    (t / "diagnosis").mkdir(parents=True)
+    (t / "result.json").write_text(json.dumps({"trial": 999, "hidden": {"arms": 1.0}}))
+    (t / "diagnosis" / "report.json").write_text("{}")
+    data = bench.collect([run])
+    s = bench.summary(data["lumped"], alpha=0.10)
+    assert s["subjects"] == 10 and s["named"] == 2 and s["named_effects"] == ["arms"]
+    assert s["statistic_quantiles"][1.0] == 0.30  # softening's 0.9 has a positive delta BIC
+    # One subject in ten may be named: the threshold sits just above the second largest.
+    assert 0.19 < s["threshold_at_alpha"] < 0.20
+    assert sum(x >= s["threshold_at_alpha"] for x in beyond) == 1
+    assert 0.5 < s["rate_upper_95"] < 0.6  # Clopper-Pearson, 2 of 10

@@ -1,0 +1,128 @@
+"""How often the single-subject diagnosis (no reference group) names an
+effect on subjects that have none: the false-alarm rate of its rule, and
+the threshold of the structural pass that would hold it at a given level.
+
+On a body that is not the model the ordinary pass seldom explains anything
+(the model-form gap dominates) and the structural pass decides: a candidate
+is named when it lowers the held-out chi^2 by more than its BIC penalty and
+removes at least `discrepancy.EXPLAINED_BEYOND` of the held-out gap left
+beyond the discrepancy.  Each no-effect subject contributes its largest
+such removal (0 when no candidate has a negative delta BIC, or the pass did
+not run): the rule's statistic under the null.  This script collects it
+from blind runs made without a reference group, e.g.
+
+    ehm-drake blind --reality lumped --trials 30 --p-none 1 --seed S \\
+        --directions x,z --levels 0.3,0.6 --duration 120 --out RUN
+    python bench/single_subject_null.py RUN [RUN ...] [--alpha 0.1] [--out null.json]
+
+and prints, per reality, the subjects named under the shipped rule (with a
+Clopper-Pearson 95% upper bound of the rate), the statistic's quantiles,
+and the smallest threshold under which at most `alpha` of the subjects are
+named.  `--out` writes the per-subject values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import beta
+
+
+def subject_statistic(report: dict) -> dict:
+    """One no-effect subject's single-subject report -> its verdict, the
+    effect named (or None), the ordinary pass's best held-out reduction and
+    the structural statistic (largest reduction beyond the discrepancy
+    among candidates with delta BIC < 0)."""
+    st = report.get("structural") or {}
+    beyond = [e["reduction_beyond"] for e in st.get("ranking", []) if e["delta_bic"] < 0]
+    ranking = report.get("ranking") or []
+    return {"verdict": report["verdict"], "named": report.get("best_effect"),
+            "ordinary_best_reduction": ranking[0]["gap_reduction_heldout"] if ranking else None,
+            "structural_ran": bool(st.get("ran")),
+            "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
+            "structural_best": next((e["effect"] for e in st.get("ranking", [])
+                                     if e["delta_bic"] < 0), None)}
+
+
+def collect(runs) -> dict:
+    """{reality: [subject statistics]} of the no-effect trials of blind runs
+    made without a reference group."""
+    out: dict[str, list] = {}
+    for run in map(Path, runs):
+        settings_path = run / "blind_settings.json"
+        if not settings_path.is_file():
+            raise SystemExit(f"{run}: not a blind run (no blind_settings.json)")
+        settings = json.loads(settings_path.read_text())
+        if settings.get("references", 0):
+            raise SystemExit(f"{run}: diagnosed against a reference group; this script "
+                             "studies the single-subject rule")
+        reality = settings.get("reality", "ehm")
+        found = 0
+        for rf in sorted(run.glob("trial_*/result.json")):
+            r = json.loads(rf.read_text())
+            rep_path = rf.parent / "diagnosis" / "report.json"
+            if "skipped" in r or r.get("hidden") or not rep_path.exists():
+                continue
+            s = subject_statistic(json.loads(rep_path.read_text()))
+            s["trial"] = rf.parent.name
+            out.setdefault(reality, []).append(s)
+            found += 1
+        if not found:
+            raise SystemExit(f"{run}: no diagnosed no-effect trial")
+    return out
+
+
+def upper_bound(k: int, n: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson upper bound of a rate seen k times in n."""
+    return 1.0 if k >= n else float(beta.ppf(confidence, k + 1, n - k))
+
+
+def threshold_for(statistics, alpha: float) -> float:
+    """The smallest structural threshold naming at most alpha of these
+    subjects (a subject is named when its statistic reaches it)."""
+    s = np.sort(np.asarray(statistics, float))[::-1]
+    allowed = int(np.floor(alpha * len(s)))
+    return float(s[allowed]) + 1e-9 if allowed < len(s) else 0.0
+
+
+def summary(subjects: list, alpha: float) -> dict:
+    n = len(subjects)
+    named = [s for s in subjects if s["named"]]
+    stat = [s["structural_statistic"] for s in subjects]
+    return {"subjects": n, "named": len(named),
+            "named_effects": sorted({s["named"] for s in named}),
+            "rate": len(named) / n, "rate_upper_95": upper_bound(len(named), n),
+            "structural_ran": sum(s["structural_ran"] for s in subjects),
+            "statistic_quantiles": {q: float(np.quantile(stat, q)) for q in (0.5, 0.9, 1.0)},
+            "threshold_at_alpha": threshold_for(stat, alpha)}
+
+
+def main(argv=None) -> None:
+    from ehm_drake.gap.single.discrepancy import EXPLAINED_BEYOND
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+")
+    ap.add_argument("--alpha", type=float, default=0.10)
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args(argv)
+    data = collect(a.runs)
+    print(f"structural threshold shipped: {EXPLAINED_BEYOND:.2f} of the gap beyond the "
+          "discrepancy")
+    for reality, subjects in sorted(data.items()):
+        s = summary(subjects, a.alpha)
+        q = s["statistic_quantiles"]
+        print(f"{reality}: {s['named']} of {s['subjects']} no-effect subjects named "
+              f"({100 * s['rate']:.0f}%, 95% upper bound {100 * s['rate_upper_95']:.0f}%; "
+              f"{', '.join(s['named_effects']) or 'none'}); structural pass ran on "
+              f"{s['structural_ran']}; statistic median {q[0.5]:.3f}, 90% {q[0.9]:.3f}, "
+              f"max {q[1.0]:.3f}; threshold for <= {100 * a.alpha:.0f}%: "
+              f"{s['threshold_at_alpha']:.3f}")
+    if a.out:
+        Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()
