@@ -61,6 +61,19 @@ def _import_graph() -> dict[str, set[str]]:
     return graph
 
 
+def test_every_package_is_installed():
+    """A non-editable install (the quick start, CI) ships only the packages
+    pyproject.toml lists: a new sub-package left out imports in a checkout
+    and fails after `pip install .`."""
+    import tomllib
+
+    listed = set(tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
+                 ["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(PACKAGE.parent).parts)
+             for p in PACKAGE.rglob("__init__.py")}
+    assert found - listed == set()
+
+
 def test_no_module_is_longer_than_700_lines():
     long = {n: len(p.read_text().splitlines()) for n, p in _modules().items()}
     assert {n: k for n, k in long.items() if k > MAX_LINES} == {}
