@@ -113,7 +113,10 @@ def pin_blas_threads() -> int | None:
                          "threads (0 leaves the BLAS library's own choice)")
     if n == 0:
         return None
-    import numpy  # noqa: F401  (loads the BLAS library threadpoolctl finds)
+    # Load the BLAS libraries first (NumPy's, and SciPy's own in its wheels):
+    # threadpoolctl limits the ones loaded when it is called.
+    import numpy  # noqa: F401
+    import scipy.linalg  # noqa: F401
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(n, user_api="blas")
