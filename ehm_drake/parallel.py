@@ -100,7 +100,7 @@ BLAS_THREADS_VARIABLE = "EHM_DRAKE_BLAS_THREADS"
 
 
 def pin_blas_threads() -> int | None:
-    """Limit NumPy's BLAS to `$EHM_DRAKE_BLAS_THREADS` threads (default 1;
+    """Limit the BLAS of NumPy and SciPy to `$EHM_DRAKE_BLAS_THREADS` threads (default 1;
     ``0`` leaves the library's own choice) in this process and the pools'
     workers, which import the package.  Returns the limit applied."""
     raw = os.environ.get(BLAS_THREADS_VARIABLE, "1").strip()
