@@ -57,6 +57,19 @@ References (short names used below):
 * Nawayseh-Griffin: N. Nawayseh, M. Griffin, Tri-axial forces at the seat
   and backrest during whole-body fore-and-aft vibration, J. Sound Vib. 281
   (2005) 921-942.
+* Huang-Griffin: Y. Huang, M. Griffin, Effect of voluntary periodic muscular
+  activity on nonlinearity in the apparent mass of the seated human body
+  during vertical random whole-body vibration, J. Sound Vib. 298 (2006)
+  824-840 (the principal resonance falls with vibration magnitude).
+* Liu-Qiu: C. Liu, Y. Qiu, Nonlinearity in the localised apparent masses of
+  the seated human body exposed to vertical vibration, Mech. Syst. Signal
+  Process. 135 (2020) 106394 (the buttock and thigh contact in the
+  nonlinearity; models fitted at 0.25, 0.5 and 1.0 m/s^2).
+* Shetty-Allen: D. Shetty, M. Allen, Fast simulation of a single
+  degree-of-freedom system consisting of an Iwan element using the method
+  of averaging, J. Vib. Acoust. 142 (2020) 051107 (Iwan models: parallel
+  Jenkins elements, spring plus Coulomb slider, amplitude-dependent stiffness
+  and friction damping).
 """
 
 from __future__ import annotations
@@ -259,6 +272,30 @@ PARAMETERS: dict[str, P] = {
     "tonic_adaptation_time": P(0.25, "s", "time constant of the tonic (postural) torque that "
                                "holds the spine and neck at the initial posture while the "
                                "subject settles; frozen for the tests"),
+    # --- tissue friction: the seated body's softening with vibration magnitude
+    # (appended last: the subjects' scatter draws of the entries above stay
+    # as they were).  A Jenkins element (spring k_J in series with a Coulomb
+    # slider slipping at k_J x_J; Iwan's elements, e.g. Shetty-Allen) in
+    # parallel with the tissue at the tuberosities and thighs, relaxed at the
+    # seated state: stuck at small dynamic compressions, slipping at larger
+    # ones, so the tissue's equivalent stiffness falls and its friction loss
+    # rises with the vibration magnitude, as the seated body's resonance does
+    # (Fairley-Griffin: ~6 Hz at 0.25 m/s^2 to ~4 Hz at 2 m/s^2 r.m.s.;
+    # Huang-Griffin; Liu-Qiu fitted models of the buttock and thigh contact
+    # at 0.25-1.0 m/s^2).  Only a share of the tissue's stiffness is
+    # frictional: stuck, the tissue is as stiff as its elastic law; slipping,
+    # it loses up to that share.
+    "tissue_friction_share": P(0.4, "-", "share of the pan tissue's Hunt-Crossley tangent stiffness "
+                               "at the seated compression that is frictional (k_J; the "
+                               "elastic law loses as much about the seated compression, so "
+                               "the stuck tissue is as stiff as before): chosen so that the "
+                               "seat-to-pelvis vertical resonance falls ~x0.93 from 0.3 to "
+                               "0.6 m/s^2 (Fairley-Griffin ~x0.87 per doubling)", "stiffness"),
+    "tissue_friction_slip": P(3.0e-4, "m", "stick range x_J of the tissue friction: of the "
+                              "order of the dynamic compression under the pelvis at "
+                              "0.3-0.6 m/s^2 r.m.s. (0.2-0.4 mm r.m.s. in this body), so that "
+                              "the element goes from mostly stuck to mostly slipping between "
+                              "these magnitudes"),
 }
 
 
@@ -316,6 +353,18 @@ EFFECT_RANGES: dict[str, dict[str, EffectRange]] = {
         2.0e6, 6.0e4, True, "N/m",
         "the pan as a 3.5 kg cushion on a vertical spring (shear 0.4 x) to the seat frame: "
         "from rigid to a soft cushion whose occupant mode is ~5 Hz")},
+    "softening": {"extra_friction_share": EffectRange(
+        0.0, 0.2, False, "-",
+        "softening beyond the typical subject's tissue friction (tissue_friction_share 0.4, "
+        "tissue_friction_slip 0.3 mm): a further share of the pan tissue's tangent stiffness "
+        "at the seated compression is frictional (0.4 -> 0.6 for the nominal subject)"),
+        "slip_factor": EffectRange(
+        1.0, 0.67, False, "-",
+        "with it, the tissue friction's stick range narrows (0.3 -> 0.2 mm), so it slips from "
+        "smaller compressions: the stuck tissue is as stiff, it loses more stiffness as the "
+        "level rises (seat-to-pelvis resonance of subject 3 x0.82 from 0.3 to 0.6 m/s^2 "
+        "instead of x0.93; people ~x0.87 per doubling, Fairley-Griffin; a larger share at "
+        "the same range mostly adds friction damping that flattens the resonance)")},
 }
 
 #: Fixed values of the effects (not scaled by strength).

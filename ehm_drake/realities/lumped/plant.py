@@ -65,6 +65,7 @@ class SystemSpec:
     c_mu: np.ndarray
     c_foam: np.ndarray
     c_kt0: np.ndarray
+    c_jenkins: np.ndarray
     c_names: tuple
     c_oN: np.ndarray
     moving_supports: bool
@@ -216,7 +217,7 @@ def build(v: dict, effects: dict, h: float) -> Built:
             planes[pad] = (o - sep["offset_mm"] * 1e-3 * n, n)
     mu_seat = effects.get("seat_friction", {}).get("mu", v["mu_seat"])
     c_body, c_sup, pB, oB, nB = [], [], [], [], []
-    k, n_exp, c, sk, sc, mu, foam = ([] for _ in range(7))
+    k, n_exp, c, sk, sc, mu, foam, jenkins = ([] for _ in range(8))
     A_support = np.zeros((len(SUPPORTS), nc))
     for i, cd in enumerate(contacts):
         c_body.append(index[cd.body])
@@ -244,6 +245,7 @@ def build(v: dict, effects: dict, h: float) -> Built:
             sc.append(HAND_CONTACT["shear_c"])
             mu.append(HAND_CONTACT["mu"])
             foam.append(0.0)
+            jenkins.append(0.0)
         else:
             kk, cc, ss, sd, mk, fm = _GROUPS[cd.group]
             k.append(v[kk])
@@ -252,6 +254,9 @@ def build(v: dict, effects: dict, h: float) -> Built:
             sc.append(v[sd])
             mu.append(mu_seat if mk == "mu_seat" else v[mk])
             foam.append(1.0 if fm else 0.0)
+            # Tissue friction under the pelvis and thighs (the seat-pan
+            # tissue; not the back pads' foam nor the heel pads).
+            jenkins.append(1.0 if cd.group in ("it", "thigh") else 0.0)
             part = {"it": "pan", "thigh": "pan", "foot": "floor", "back": "back"}[cd.group]
             A_support[SUPPORTS.index(part), i] = 1.0
         n_exp.append(v["hc_exponent"])
@@ -289,7 +294,7 @@ def build(v: dict, effects: dict, h: float) -> Built:
         c_body=np.array(c_body), c_sup=np.array(c_sup), c_pB=np.array(pB), c_oB=np.array(oB),
         c_nB=np.array(nB), c_k=np.array(k), c_n=np.array(n_exp), c_c=np.array(c),
         c_sk=np.array(sk), c_sc=np.array(sc), c_mu=np.array(mu), c_foam=np.array(foam),
-        c_kt0=np.zeros(nc), c_names=tuple(cd.name for cd in contacts),
+        c_kt0=np.zeros(nc), c_jenkins=np.array(jenkins), c_names=tuple(cd.name for cd in contacts),
         c_oN=np.einsum("ni,ni->n", np.array(oB), np.array(nB)),
         moving_supports=bool(np.any(np.array(c_sup) < nk)),
         inv_slide=1.0 / (1.0 - v["stick_fraction"]),

@@ -144,6 +144,24 @@ def run(prep: Prepared, signal, positions: bool = False) -> RunOutput:
         spec.c_kt0 = 1.5 * spec.c_k * np.sqrt(d)  # Hunt-Crossley tangent at the seated depth
         system.seated_depth = d
         system.hardening = hard * 1e6  # per mm^2 -> per m^2
+    # Tissue friction (Jenkins elements under the pelvis and thighs), relaxed
+    # at the seated state: a share of the tissue's Hunt-Crossley tangent
+    # stiffness there is frictional (stuck: the tissue as stiff as its
+    # elastic law; slipping beyond +-x_J: softer); the softening effect adds
+    # to the share and narrows the stick range.
+    soft = prep.effects.get("softening", {})
+    share = prep.values["tissue_friction_share"] + soft.get("extra_friction_share", 0.0)
+    if not 0.0 <= share < 1.0:
+        raise RealityError(f"lumped: the tissue's friction share must be in [0, 1), got "
+                           f"{share:.3g} (tissue_friction_share + softening)")
+    if share > 0:
+        d = prep.seated_depth
+        kt = spec.c_jenkins * spec.c_n * spec.c_k * d ** (spec.c_n - 1.0)
+        system.jenkins_k = share * kt
+        system.jenkins_x = spec.c_jenkins * prep.values["tissue_friction_slip"] \
+            * soft.get("slip_factor", 1.0)
+        system.seated_depth = d
+        system.jenkins = True
     system.seat_acc = signal.acceleration
     n = signal.num_samples
     system.start_log(n, positions)

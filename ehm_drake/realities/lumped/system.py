@@ -16,6 +16,16 @@ Laws:
   Coulomb limit mu F, sliding at it, a linear transition between.  The
   bristle deflections are discrete state.  Optional foam hardening
   + k_t H (d - d_s)^3 / 3 about each point's seated compression d_s.
+  Tissue friction (the subject's own softening with vibration magnitude):
+  a share of the tissue's tangent stiffness at the tuberosities and thighs
+  is a Jenkins element, a spring k_J in series with a Coulomb slider that
+  slips at k_J x_J, in place of as much of the elastic law about the seated
+  compression d_s: normal force + k_J (e - (d - d_s)).  The spring's
+  deflection e (discrete state, zero at the seated state) follows the
+  compression while |e| < x_J and stays at +-x_J while the slider slips.
+  Stuck at small compressions (the tissue as stiff as its elastic law),
+  slipping at larger ones (up to k_J less stiffness, friction loss): the
+  equivalent stiffness falls with amplitude.
 * Joints: per revolute DoF an elastic torque with a neutral zone and
   exponential stiffening beyond it (viscous damping is the Drake joint's,
   implicit in the solver); linear springs on the viscera and cushion
@@ -111,6 +121,12 @@ class LumpedHuman(LeafSystem):
         self.seat_acc = None  # (N, 3) seat acceleration samples at h, or None
         self.adapt_tonic = False
         self.hardening = 0.0  # foam hardening H (1/m^2), on the foam contacts
+        # Tissue friction (Jenkins elements): spring k_J (N/m) and slip
+        # displacement x_J (m) per contact, zero where there is none; set
+        # by the runner from the seated depths (`simulate.run`).
+        self.jenkins_k = np.zeros(len(s.c_body))
+        self.jenkins_x = np.zeros(len(s.c_body))
+        self.jenkins = False
         self.seated_depth = np.zeros(len(s.c_body))
         self.log = None  # dict of preallocated arrays (see start_log)
         self._key = None
@@ -135,7 +151,7 @@ class LumpedHuman(LeafSystem):
         t = context.get_time()
         x = self._state_in.Eval(context)
         xd = context.get_discrete_state_vector().get_value()
-        key = (t, x.tobytes(), xd.tobytes(), self.hardening, self.adapt_tonic)
+        key = (t, x.tobytes(), xd.tobytes(), self.hardening, self.adapt_tonic, self.jenkins)
         if self._key == key:
             return self._out
         s = self.spec
@@ -188,6 +204,18 @@ class LumpedHuman(LeafSystem):
         fn = s.c_k * d ** s.c_n * np.maximum(1.0 - 1.5 * s.c_c * vn, 0.0)
         if self.hardening:
             fn = fn + s.c_foam * s.c_kt0 * self.hardening * (d - self.seated_depth) ** 3 / 3.0
+        if self.jenkins:
+            # Jenkins element in place of as much elastic stiffness about the
+            # seated depth: k_J (e - (d - d_s)); the next deflection follows the
+            # compression rate (-vn) inside the stick range +-x_J and
+            # stays at its edge while the slider slips (relaxed when the
+            # contact opens).
+            ej = xd[lay.jenkins]
+            fn = fn + self.jenkins_k * (ej - (d - self.seated_depth))
+            ej_next = np.where(depth > 0.0, np.minimum(np.maximum(
+                ej - self.h * vn, -self.jenkins_x), self.jenkins_x), 0.0)
+        else:
+            ej_next = None
         fn = np.maximum(fn, 0.0)
         vt = Vr - vn[:, None] * N
         # Elasto-plastic bristle (Dupont): z is the elastic shear deflection,
@@ -241,7 +269,7 @@ class LumpedHuman(LeafSystem):
             self.log["support"][k] = s.A_support @ f
             if "q" in self.log:
                 self.log["q"][k] = q
-        self._out = {"tau": tau, "T": T, "F": F, "z_next": z_next, "y": y,
+        self._out = {"tau": tau, "T": T, "F": F, "z_next": z_next, "ej_next": ej_next, "y": y,
                      "a_seat": a_seat, "f": f, "depth": depth, "fn": fn, "P": P}
         self._key = key
         return self._out
@@ -278,6 +306,8 @@ class LumpedHuman(LeafSystem):
         if self.adapt_tonic:
             xn[lay.tonic] = xd[lay.tonic] - self.h * s.ki * (out["y"][:na] - s.q0)
         xn[lay.z] = out["z_next"].ravel()
+        if out["ej_next"] is not None:
+            xn[lay.jenkins] = out["ej_next"]
         a2 = float(out["a_seat"] @ out["a_seat"])
         xn[lay.ms] = ms + self.h / s.cc_tau * (a2 - ms)
         discrete_state.get_mutable_vector().SetFromVector(xn)
@@ -301,6 +331,7 @@ class StateLayout:
         self.buf = take(depth * n_y)
         self.z = take(3 * n_contacts)
         self.ms = take(1)
+        self.jenkins = take(n_contacts)
         self.size = i
         self.n_y = n_y
 

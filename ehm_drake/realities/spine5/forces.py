@@ -84,9 +84,15 @@ class Spine5Forces(LeafSystem):
         foam = ef.get("seat_foam_stiffening", {})
         self.gamma = np.where(self.is_foot, 0.0, foam.get("gamma_per_mm2", 0.0) * 1e6)
         self.foam_alpha = self.h / foam.get("tau_slow_s", 1.5)
-        soft = ef.get("softening", {})
-        self.soft_s = np.where(self.is_foot, 0.0, soft.get("short_range_fraction", 0.0))
-        self.soft_dc = soft.get("range_mm", 0.3) * 1e-3
+        # The seat tissue's short-range share: the subject's own plus the
+        # softening effect's extra (not at the feet: shoe soles).
+        s_soft = v["soft_fraction"] + ef.get("softening", {}).get(
+            "extra_short_range_fraction", 0.0)
+        if not 0.0 <= s_soft < 1.0:
+            raise ValueError(f"spine5: the tissue's short-range share must be in [0, 1), got "
+                             f"{s_soft:.3g} (soft_fraction + softening)")
+        self.soft_s = np.where(self.is_foot, 0.0, s_soft)
+        self.soft_dc = v["soft_range"]
         self.softening = bool(np.any(self.soft_s > 0))
         self.iq_cushion = (plant.GetJointByName("cushion_z").position_start()
                            if "cushion" in segs else None)

@@ -44,6 +44,12 @@ Sources (short keys used in the table):
   25-40 ms (e.g. Zedka et al. 1998: erector spinae 20-30 ms; Cholewicki et al.
   2000); vestibulocollic latencies are shorter (~10-20 ms) but the
   orientation estimate adds processing time: one delay is used for both.
+* SOFT -- the seated body's vertical resonance falls with vibration
+  magnitude: ~6 Hz at 0.25 m/s^2 to ~4 Hz at 2.0 m/s^2 r.m.s. (Fairley &
+  Griffin 1989, J. Biomech. 22:81-94), x0.87 per doubling; short-range
+  stiffness of muscle and soft tissue lost beyond small strains (Loram,
+  Maganaris & Lakie 2007, J. Physiol. 584:661-675: the calf's stiffness falls
+  81 % from 0.03 to 7 deg).
 * SEAT -- seat and tissue stiffness: the vertical seated-body resonance near
   5 Hz on a rigid seat is carried by buttock-thigh tissue of total vertical
   stiffness of order 5e4-1e5 N/m with damping of order 1-2e3 N s/m (lumped
@@ -269,6 +275,23 @@ PARAMS: dict[str, P] = {
     "tmax_ankle": P(80.0, "N m", "TMAX ankle (dorsi/plantar mean)"),
     "tau_act": P(0.040, "s", "ACT first-order activation"),
     "delay": P(0.030, "s", "DELAY baseline neural transport delay"),
+    # ------------------ seat tissue softening with vibration magnitude (SOFT)
+    # (appended last: the subjects' scatter draws of the entries above stay
+    # as they were).  Every subject's seat tissue (pan and back-rest points)
+    # has a short-range part of its normal stiffness that saturates with the
+    # dynamic compression about its slow mean: tangent
+    # k (1 - s tanh^2(dyn / dc)) (`forces.Spine5Forces.contact`); the
+    # `softening` effect adds to s.
+    "soft_fraction": P(0.40, "-", "SOFT: short-range share s of the seat tissue's stiffness; "
+                                  "with soft_range it puts the nominal subject's seat-to-pelvis "
+                                  "vertical resonance at x0.92 from 0.3 to 0.6 m/s^2 r.m.s. "
+                                  "(people: x0.87 per doubling, Fairley & Griffin 1989)"),
+    "soft_range": P(4.0e-4, "m", "SOFT: dynamic compression dc over which the short-range "
+                                 "stiffness is lost: of the order of the 0.25-0.5 mm r.m.s. "
+                                 "under the pelvis at 0.3-0.6 m/s^2 r.m.s., so the loss grows "
+                                 "between these levels (at 0.03 mm it is saturated at both and "
+                                 "the resonance no longer moves with level; at 1 mm the slope "
+                                 "is x0.94 at s = 0.6)", False),
 }
 
 
