@@ -285,8 +285,8 @@ PARAMETERS: dict[str, P] = {
     # at 0.25-1.0 m/s^2).  Only a share of the tissue's stiffness is
     # frictional: stuck, the tissue is as stiff as its elastic law; slipping,
     # it loses up to that share.
-    "tissue_friction_share": P(0.4, "-", "share of the pan tissue's Hunt-Crossley tangent stiffness "
-                               "at the seated compression that is frictional (k_J; the "
+    "tissue_friction_share": P(0.4, "-", "share of the pan tissue's Hunt-Crossley tangent "
+                               "stiffness at the seated compression that is frictional (k_J; the "
                                "elastic law loses as much about the seated compression, so "
                                "the stuck tissue is as stiff as before): chosen so that the "
                                "seat-to-pelvis vertical resonance falls ~x0.93 from 0.3 to "
