@@ -388,6 +388,25 @@ def cmd_modes(args) -> int:
 # ---------------------------------------------------------------------------
 
 
+def _excitation_of(data: str, ts) -> str:
+    """How a data folder was recorded: ``simultaneous`` when its simulation
+    summary or its seat record has more than one excited axis, else
+    ``separate`` (one axis per test, as lab folders hold)."""
+    summary = Path(data) / "summary.json"
+    if summary.is_file():
+        try:
+            direction = json.loads(summary.read_text()).get("excitation", {}).get("direction")
+        except (ValueError, AttributeError):
+            direction = None
+        if isinstance(direction, str):
+            return "simultaneous" if len(direction) > 1 else "separate"
+    if ts is not None:
+        rms = np.sqrt(np.mean(np.square(ts.seat_acc), axis=0))
+        if np.sum(rms > 0.05 * rms.max()) > 1:
+            return "simultaneous"
+    return "separate"
+
+
 def cmd_fit(args) -> int:
     from .analysis.formats import read_data_dir
     from .analysis.transmissibility import transmissibility
@@ -402,8 +421,9 @@ def cmd_fit(args) -> int:
     measures = _measures(args)
     weights = load_weights(args.weights)
     out = prepare_output_dir(args.out, args.force)
+    excitation = args.excitation if args.excitation != "auto" else _excitation_of(args.data, ts)
     result = fit(frf, start, args.free, weights, args.holdout, measures, args.variant,
-                 workers=args.workers, progress=not args.quiet)
+                 workers=args.workers, progress=not args.quiet, excitation=excitation)
     report = result.report
     files = write_outputs(result, frf, out)
     if result.interrupted:
@@ -505,6 +525,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "segment, segment_dof or direction/segment/dof")
     p.add_argument("--holdout", metavar="KEY=VALUE", help="leave data out of the fit and "
                    "report the error on it: direction=z, segment=knee_l, level=0.3")
+    p.add_argument("--excitation", choices=["auto", "separate", "simultaneous"], default="auto",
+                   help="how the data were recorded: one seat axis per test (separate) or "
+                   "the axes at a level together (simultaneous, multiple-input estimates); "
+                   "auto: from the folder's summary.json or seat record, else separate. "
+                   "Sets the model's softening at the data's levels")
     p.add_argument("--workers", type=int, default=2, help="parallel processes (default 2)")
     p.add_argument("--no-verify", action="store_true", help="skip the time-domain check")
     p.add_argument("--verify-duration", type=positive_float("--verify-duration"), default=60.0,

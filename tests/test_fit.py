@@ -30,12 +30,14 @@ def recovery(params):
     return free, true, truth, data
 
 
-#: Since a contact pair's stiffness scales its tissue with it (the pair as a
-#: whole, `fit_parameters.yaml` `follows`), this descent ends in a local
-#: minimum 1.2% above the truth's cost (0.002476 against 0.002447), thigh
-#: contact stiffness +16% against the pelvis' -7%, which the standard errors
-#: (2.3%) do not reveal: issue "The fit finds the subject again".
-LOCAL_MINIMUM = {"contact_thighs_stiffness": 0.20}
+#: This descent ends in a local minimum 1.4% above the truth's cost (0.002481
+#: against 0.002447, each model at its own equilibrium and softening): hip
+#: stiffness x1.5 of the truth (flagged), thigh contact +14% and neck
+#: stiffness +12% beside it, which their standard errors (1.9%, 2.6%) do not
+#: reveal: issue "The fit finds the subject again".  (Before the fit compared
+#: the model at the data's level, with data of the model at rest: 1.2%
+#: above, thigh contact +16%.)
+LOCAL_MINIMUM = {"contact_thighs_stiffness": 0.20, "neck_stiffness": 0.15}
 
 
 @pytest.mark.slow
@@ -223,3 +225,112 @@ def test_phase_first_without_phase_rows_is_the_plain_descent(params):
     costs = {s["start"]: s["cost"] for s in r["starts"]}
     assert costs["phase first"] == pytest.approx(costs["plain"], rel=1e-12)
     assert r["parameters"][0]["scale"] == pytest.approx(1.3, rel=0.05)
+
+
+# ---------------------------------------------------------------------------
+# The model at the data's level; simultaneous axes
+# ---------------------------------------------------------------------------
+
+
+def _start_error(data, params, excitation="separate"):
+    """The fit's RMS gain error of the start model on `data` (no descent)."""
+    r = fit(data, params, "his_kp", workers=1, progress=False, max_evaluations=1,
+            stages=1, starts=("plain",), excitation=excitation).report
+    return r["gain_error_before"]
+
+
+def test_the_fit_compares_the_data_with_the_model_at_their_level(params):
+    """The body softens with the vibration's magnitude: noise-free data of
+    the model at 1.5 m/s^2 are the fit's start model to 0.1% (the model at
+    that level), while the model at rest misses them by more than 5%."""
+    data = synthetic_frf(params, directions="z", coherence=0.99, n_averages=10**8,
+                         level_rms=1.5)
+    assert _start_error(data, params) < 1e-3
+    at_rest = FrfData(data.direction, data.segment, data.dof, data.freq_hz, data.gain,
+                      data.phase_deg, data.coherence)  # no level: the model at rest
+    assert _start_error(at_rest, params) > 0.05
+
+
+def test_paths_zero_by_symmetry_are_found_and_left_out(params):
+    """In the symmetric model fore-aft and vertical excitation move no
+    midline segment sideways: exactly those paths are found zero, and data
+    on them, whatever their coherence, are left out of the fit with a
+    warning."""
+    from ehm_drake.analysis.linear import default_frequencies
+    from ehm_drake.identification.evaluation import Evaluator, structural_zeros
+    from ehm_drake.model.anthropometry import REFERENCE
+    from ehm_drake.systems.outputs import CHANNEL_NAMES
+
+    freqs = default_frequencies()[::8]
+    ev = Evaluator(params.to_dict(), (REFERENCE.mass_kg, REFERENCE.stature_m,
+                                      REFERENCE.resolved_sitting_height()),
+                   "default", ["his_kp"], freqs, "xz").setup()
+    T, _ = ev.transmissibility(np.zeros(1))
+    midline = ("pelvis", "trunk", "head")
+    assert structural_zeros(T, "xz") == {(d, f"{s}_{o}") for d in "xz" for s in midline
+                                         for o in ("y", "roll", "yaw")}
+    # Data on such a path, with coherence 1: left out, with a warning.
+    n = len(freqs)
+    pitch = T[0, :, CHANNEL_NAMES.index("head_pitch"), 0]
+    rows = FrfData(np.full(2 * n, "x"), np.full(2 * n, "head"), np.r_[["pitch"] * n, ["y"] * n],
+                   np.r_[freqs, freqs], np.r_[np.abs(pitch), np.full(n, 0.01)],
+                   np.r_[np.degrees(np.angle(pitch)), np.full(n, 90.0)], np.full(2 * n, 0.999))
+    r = fit(rows, params, "his_kp", workers=1, progress=False, max_evaluations=1, stages=1,
+            starts=("plain",)).report
+    assert any("x->head_y" in w for w in r["warnings"])
+    assert set(r["error_per_channel"]) == {"x/head/pitch"}
+
+
+def test_simultaneous_axes_weight_each_path_by_its_share():
+    """With several axes excited together the coherence is the output's
+    multiple coherence: a path's weight is scaled by its share of the
+    output's squared gains, so a path 1% of its output's gain counts 1e-4 of
+    a path that makes all of it."""
+    from ehm_drake.identification.evaluation import path_shares
+
+    f = np.array([2.0, 2.5])  # (no first Welch bin among them: both rows count)
+    data = FrfData(np.array(["x", "x", "y", "y"]), np.full(4, "head"), np.full(4, "roll"),
+                   np.r_[f, f], np.array([0.01, 3.0, 1.0, 4.0]), np.zeros(4), np.full(4, 0.95),
+                   np.full(4, 0.5))
+    shares = path_shares(data)
+    assert shares[("x", "head", "roll", 2.0, 0.5)] == pytest.approx(1e-4 / (1 + 1e-4))
+    assert shares[("x", "head", "roll", 2.5, 0.5)] == pytest.approx(9 / 25)
+    assert len(Residuals.build(data, {}).row_f) == 4
+    alone = Residuals.build(data, {})
+    shared = Residuals.build(data, {}, shares=shares)
+    w_alone, w_shared = alone.w_gain**2, shared.w_gain**2
+    ratio = (w_shared / w_shared.sum()) / (w_alone / w_alone.sum())
+    assert ratio[0] / ratio[2] == pytest.approx(1e-4, rel=1e-6)
+
+
+@pytest.mark.slow
+def test_the_fit_finds_a_simulated_subject_again(tmp_path, params):
+    """A subject made by the model with five parameters changed (lumbar
+    stiffness x1.5, spine axial x1.4, pelvis-pan contact x1.3, neck damping
+    x0.6, head-in-space kp x1.5), simulated in the time domain with x, y and
+    z together for 90 s (the implicit design, for the suite's time; the
+    reference design's run is `bench/bench_fit.py --subject`) and fitted
+    with y held out: the cost falls by more than 90%, the held-out lateral
+    error stays under 0.2 and the five scales come back within 15%."""
+    import json
+
+    from bench_scripts import bench_script
+
+    from ehm_drake.params import save_params
+
+    SUBJECT = bench_script("bench_fit").SUBJECT
+
+    truth = apply_scales(params, resolve_free(",".join(SUBJECT)), list(SUBJECT.values()))
+    save_params(truth, tmp_path / "subject.yaml")
+    assert main(["simulate", "--params", str(tmp_path / "subject.yaml"), "--direction", "xyz",
+                 "--duration", "90", "--seed", "31", "--design", "implicit",
+                 "--out", str(tmp_path / "data"), "--quiet"]) == 0
+    assert main(["fit", str(tmp_path / "data"), "--holdout", "direction=y", "--no-verify",
+                 "--out", str(tmp_path / "fit"), "--quiet"]) == 0
+    r = json.loads((tmp_path / "fit" / "fit_report.json").read_text())
+    assert r["excitation"]["kind"] == "simultaneous"
+    assert r["cost_after"] < 0.1 * r["cost_before"]
+    assert r["heldout_error"] < 0.2
+    scales = {p["name"]: p["scale"] for p in r["parameters"]}
+    for name, s in SUBJECT.items():
+        assert scales[name] == pytest.approx(s, rel=0.15), name

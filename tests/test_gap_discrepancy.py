@@ -3,6 +3,7 @@ known truths, known noise, no model."""
 
 import numpy as np
 import pytest
+from bench_scripts import bench_script
 
 from ehm_drake.gap.lab.blind import score
 from ehm_drake.gap.single.discrepancy import (
@@ -187,18 +188,6 @@ def test_scoring_on_a_reality_counts_named_effects_not_the_model_form_gap():
     assert score({"arms": 1.0}, rep, True, reality=True)["top1"]
 
 
-def _bench(name: str):
-    """`bench/{name}.py`, imported (a script, not a module of the package)."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[1] / "bench" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     """`bench/single_subject_null.py` on a blind run of ten no-effect subjects:
     the structural statistic is the largest reduction among candidates with a
@@ -206,7 +195,7 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     at most alpha of the subjects."""
     import json
 
-    bench = _bench("single_subject_null")
+    bench = bench_script("single_subject_null")
     run = tmp_path / "run"
     run.mkdir()
     (run / "blind_settings.json").write_text(json.dumps({"reality": "lumped", "references": 0}))

@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from bench_scripts import bench_script
 
 from ehm_drake.gap.library.models import TestInput as _TestInput
 from ehm_drake.gap.reference_group.group import MIN_SUBJECTS, ReferenceGroup, level_pairs
@@ -466,8 +467,9 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
 
     scored = out / "rescored.json"
     with redirect_stdout(io.StringIO()):
-        _bench("rescore_blind").main([str(out), "--rethreshold", "--contrasts",
-                                      str(out / "reference" / "contrasts"), "--out", str(scored)])
+        bench_script("rescore_blind").main([str(out), "--rethreshold", "--contrasts",
+                                            str(out / "reference" / "contrasts"),
+                                            "--out", str(scored)])
     again = json.loads(scored.read_text())["trials"][0]["ranking"]
     for e in rep["ranking"]:
         a = next(x for x in again if x["effect"] == e["effect"])
@@ -652,22 +654,11 @@ def test_null_threshold_of_mixed_sign_gains_stays_near_their_quantile():
 DATA = Path(__file__).resolve().parent / "data"
 
 
-def _bench(name: str):
-    """`bench/{name}.py`, imported (a script, not a module of the package)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        name, DATA.parent.parent / "bench" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_effect_atlas_reach_is_the_share_in_the_span():
     """`bench/effect_atlas.py`'s reach: the share of a complex (whitened)
     effect in the real span of the model's first-order directions; 1 inside
     the span, 0 orthogonal to it, the squared cosine between."""
-    atlas = _bench("effect_atlas")
+    atlas = bench_script("effect_atlas")
     rng = np.random.default_rng(3)
     n = 200
     b1, b2 = (rng.normal(size=n) + 1j * rng.normal(size=n) for _ in range(2))
@@ -692,7 +683,7 @@ def test_effect_atlas_loop_response_is_the_delayed_closed_loop():
     are the whole delayed."""
     from ehm_drake.gap.library.family import response
 
-    atlas = _bench("effect_atlas")
+    atlas = bench_script("effect_atlas")
     rng = np.random.default_rng(5)
     n, m, h = 12, 4, 1e-3
     A = np.diag(rng.uniform(0.5, 0.95, n)) + 0.02 * rng.normal(size=(n, n))
@@ -724,7 +715,7 @@ def test_effect_atlas_feedback_parts_add_up_to_the_cut_feedback():
     input (h e on the integral states, whatever the gains)."""
     from ehm_drake.gap.library.family import linearize_cut
 
-    atlas = _bench("effect_atlas")
+    atlas = bench_script("effect_atlas")
     params = load_params()
     parts = atlas.feedback_parts(params)
     lin = linearize_cut(params)
@@ -756,7 +747,7 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
     from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
-    nc = _bench("null_calibration")
+    nc = bench_script("null_calibration")
     data = json.loads((DATA / "lumped_null_evidence.json").read_text())
     assert sum(len(e["evidence"]) for e in data.values()) == 68
     level = FAMILY_ALPHA / 8
@@ -782,7 +773,7 @@ def test_a_group_of_16_names_fewer_no_effect_subjects_than_a_group_of_8():
     on, with the hits (docs/history/gap-diagnosis-on-realities.md, "A group of 16")."""
     from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, null_threshold
 
-    nc = _bench("null_calibration")
+    nc = bench_script("null_calibration")
     k8 = json.loads((DATA / "lumped_null_evidence.json").read_text())
     k16 = json.loads((DATA / "lumped_null_evidence_k16.json").read_text())
     common = sorted(set(k8) & set(k16))
@@ -1089,7 +1080,7 @@ def test_the_family_wise_test_on_measured_no_effect_subjects():
     record, not a blind confirmation: docs/history/gap-diagnosis-on-realities.md)."""
     from ehm_drake.gap.reference_group.calibration import thresholds
 
-    nc = _bench("null_calibration")
+    nc = bench_script("null_calibration")
     spine5 = json.loads((DATA / "spine5_null_evidence.json").read_text())
     assert sum(len(e["evidence"]) for e in spine5.values()) == 30
     assert all(len(g) == 16 for e in spine5.values() for g in e["null_gains"].values())

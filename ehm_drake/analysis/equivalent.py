@@ -133,11 +133,13 @@ def element_rms(linear, spectrum: SeatSpectrum) -> np.ndarray:
 
 def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=None,
                       tolerance: float = TOLERANCE, max_iterations: int = MAX_ITERATIONS,
-                      fd_step: float | None = None) -> EquivalentLinear:
+                      fd_step: float | None = None, rms_start=None) -> EquivalentLinear:
     """The linearization of `model` (an `EhmDiagram` built without a signal)
     at the level of `spectrum`, about its static equilibrium (computed when
     `root_context` is None).  `outputs`: the output ports to linearize
-    (default `ehm_drake.analysis.linear.OUTPUT_PORTS`)."""
+    (default `ehm_drake.analysis.linear.OUTPUT_PORTS`); `rms_start`: the
+    elements' RMS movements to start the iteration from (default at rest;
+    a nearby model's answer saves iterations)."""
     from ..simulation import static_equilibrium
     from .linear import FD_STEP, OUTPUT_PORTS, linearize
 
@@ -155,7 +157,8 @@ def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=
     sctx = soft.GetMyMutableContextFromRoot(root_context)
     from ..model.softening import equivalent_loss
 
-    s = np.zeros(elements.n)
+    s = np.zeros(elements.n) if rms_start is None else np.asarray(rms_start, float).copy()
+    warm = rms_start is not None
     relax, last = 0.5, np.inf
     try:
         for it in range(1, max_iterations + 1):
@@ -179,7 +182,7 @@ def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=
                 relax = max(0.5 * relax, 0.05)
             last = change
             s = (np.exp((1 - relax) * np.log(np.maximum(s, 1e-12)) + relax * np.log(s_new))
-                 if it > 1 else s_new)
+                 if it > 1 or warm else s_new)
         else:
             raise EquivalentLinearError(
                 f"the equivalent-linear iteration did not settle in {max_iterations} steps "

@@ -15,15 +15,20 @@ above `min_coherence`:
   1/(rows of the channel) so that every channel counts once.
 
 The model side is the linear frequency response of the closed loop
-(`ehm_drake.analysis.linear`), linearized by finite differences about the
-static equilibrium of the starting parameters (the equilibrium moves by
-millimetres as contact stiffnesses change, a second-order effect on the
-FRF; the final parameters are re-linearized at their own equilibrium and
-verified in the nonlinear time domain).  The optimizer is scipy's bounded
-trust-region least squares on log(scale) of each free parameter, with the
-finite-difference Jacobian evaluated in parallel worker processes, run from
-two starts (`STARTS`: the phases first, then gain and phase; and gain and
-phase at once), the lower cost kept.
+(`ehm_drake.analysis.linear`) at the data's vibration levels (the body's
+softening, `ehm_drake.identification.evaluation`), linearized by finite
+differences about the static equilibrium of the starting parameters (the
+equilibrium moves by millimetres as contact stiffnesses change, a
+second-order effect on the FRF; the final parameters are re-linearized at
+their own equilibrium and softening, and verified in the nonlinear time
+domain).  Paths the symmetric model cannot produce are left out; with
+simultaneous axes each path is weighted by its share of its output.
+
+The optimizer is scipy's bounded trust-region least squares on log(scale)
+of each free parameter, with the finite-difference Jacobian evaluated in
+parallel worker processes, run from two starts (`STARTS`: the phases
+first, then gain and phase; and gain and phase at once), the lower cost
+kept; the report says when the starts disagree (`starts_disagree`).
 
 Identifiability
 ---------------
@@ -47,7 +52,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -57,22 +62,29 @@ from scipy.optimize import least_squares
 from ..analysis.formats import FrfData
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..parallel import process_pool
-from ..params import ModelParams, ParameterError, params_from_dict, save_params
+from ..params import ModelParams, ParameterError, save_params
 from ..progress import Progress
-from ..systems.outputs import CHANNEL_NAMES
+from ..signals import BAND_HZ
+from .evaluation import (
+    Evaluator,
+    FitError,
+    Residuals,
+    drop_paths,
+    excitation_groups,
+    init_worker,
+    path_shares,
+    residual,
+    structural_zeros,
+    worker_residual,
+    zero_paths_warning,
+)
 from .parameters import (
     FreeParameter,
-    apply_scales,
     representative,
     resolve_free,
     scale_bounds,
 )
 
-#: Default channel weights: head and trunk prioritised over the pelvis
-#: (Desai et al. IV), knees least.
-DEFAULT_SEGMENT_WEIGHTS = {"head": 1.0, "trunk": 1.0, "pelvis": 0.5, "knee_l": 0.3, "knee_r": 0.3}
-COHERENCE_CAP = 0.99
-UNSTABLE_PENALTY = 30.0
 #: The fit's starts (`fit(starts=...)`), each a staged descent from the
 #: start parameters; the lower cost at its own equilibrium is kept.  "phase
 #: first" fits the phase rows alone, then gain and phase from there; "plain"
@@ -88,10 +100,6 @@ STARTS = ("phase first", "plain")
 #: Further starts `fit(starts=...)` accepts: "gain first" (gains alone, then
 #: both), which lands in that other basin (3.5x the truth's cost, held out).
 OTHER_STARTS = ("gain first",)
-
-
-class FitError(RuntimeError):
-    """The fit cannot proceed (bad data for fitting, no usable rows, ...)."""
 
 
 # ---------------------------------------------------------------------------
@@ -121,205 +129,6 @@ def load_weights(path: str | Path | None) -> dict[str, float]:
             raise ParameterError(f"{path}: empty key")
         out[str(k)] = float(v)
     return out
-
-
-def channel_weight(weights: dict[str, float], direction: str, segment: str, dof: str) -> float:
-    for key in (f"{direction}/{segment}/{dof}", f"{segment}_{dof}", segment):
-        if key in weights:
-            return weights[key]
-    return DEFAULT_SEGMENT_WEIGHTS.get(segment, 1.0)
-
-
-# ---------------------------------------------------------------------------
-# Residuals
-# ---------------------------------------------------------------------------
-
-
-@dataclass
-class Residuals:
-    """Maps a model transmissibility array to the weighted residual vector
-    for a fixed set of measured rows (picklable)."""
-
-    freqs: np.ndarray  # unique frequencies the model is evaluated at
-    directions: str
-    row_f: np.ndarray  # index into freqs per row
-    row_c: np.ndarray  # channel index (0..29) per row
-    row_d: np.ndarray  # direction index per row
-    log_gain: np.ndarray
-    phase: np.ndarray  # rad
-    w_gain: np.ndarray
-    w_phase: np.ndarray
-    keys: list  # (direction, segment, dof, level) per row
-    rows_per_key: dict = field(default_factory=dict)
-
-    @classmethod
-    def build(cls, frf: FrfData, weights: dict[str, float], phase_weight: float = 0.5,
-              min_coherence: float = 0.3, phase_min_coherence: float = 0.8) -> Residuals:
-        # The first bin of each Welch grid is not an estimate of T(f) (its window
-        # reaches 0 Hz: `FrfData.first_welch_bin`); the fit leaves it out as the gap
-        # diagnosis does.
-        keep = (frf.coherence >= min_coherence) & ~frf.first_welch_bin()
-        if not np.any(keep):
-            raise FitError(f"no data row has coherence >= {min_coherence} (the first bin of "
-                           "each Welch grid left out); nothing to fit")
-        direction = frf.direction[keep]
-        segment = frf.segment[keep]
-        dof = frf.dof[keep]
-        f = frf.freq_hz[keep]
-        gain = frf.gain[keep]
-        coh = frf.coherence[keep]
-        level = frf.level_rms[keep]
-        if np.any(gain <= 0):
-            i = int(np.argmax(gain <= 0))
-            raise FitError(f"zero gain in {direction[i]}/{segment[i]}/{dof[i]} at {f[i]:g} Hz: "
-                           "its log error is undefined; drop the row or its channel")
-        directions = "".join(d for d in "xyz" if d in set(direction))
-        freqs = np.unique(f)
-        c = np.array([CHANNEL_NAMES.index(f"{s}_{d}") for s, d in zip(segment, dof, strict=True)])
-        g2 = np.minimum(coh, COHERENCE_CAP) ** 2
-        w_coh = g2 / (1.0 - g2)
-        keys = [(d, s, o, float(lv)) for d, s, o, lv in zip(direction, segment, dof, level,
-                                                             strict=True)]
-        counts: dict = {}
-        for k in keys:
-            counts[k] = counts.get(k, 0) + 1
-        w_ch = np.array([channel_weight(weights, k[0], k[1], k[2]) for k in keys])
-        n_rows = np.array([counts[k] for k in keys], float)
-        base = w_ch * w_coh / n_rows
-        base = base / base.sum()
-        w_gain = np.sqrt(base)
-        w_phase = np.where(coh >= phase_min_coherence, np.sqrt(base) * phase_weight, 0.0)
-        return cls(freqs, directions, np.searchsorted(freqs, f), c,
-                   np.array([directions.index(d) for d in direction]), np.log(gain),
-                   np.radians(frf.phase_deg[keep]), w_gain, w_phase, keys, counts)
-
-    @property
-    def size(self) -> int:
-        return 2 * len(self.row_f)
-
-    def model_values(self, T: np.ndarray) -> np.ndarray:
-        return T[self.row_f, self.row_c, self.row_d]
-
-    def __call__(self, T: np.ndarray) -> np.ndarray:
-        t = self.model_values(T)
-        e_gain = np.log(np.abs(t)) - self.log_gain
-        e_phase = np.angle(t * np.exp(-1j * self.phase))
-        return np.concatenate([self.w_gain * e_gain, self.w_phase * e_phase])
-
-    def channel_errors(self, T: np.ndarray) -> dict[str, float]:
-        """RMS log-gain error per channel, as a fraction (0.1 = ~10%)."""
-        t = self.model_values(T)
-        e = np.log(np.abs(t)) - self.log_gain
-        out: dict[str, list[float]] = {}
-        for k, ei in zip(self.keys, e, strict=True):
-            name = f"{k[0]}/{k[1]}/{k[2]}" + ("" if math.isnan(k[3]) else f"@{k[3]:g}")
-            out.setdefault(name, []).append(ei)
-        return {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in out.items()}
-
-    def gain_error(self, T: np.ndarray) -> float:
-        """Weighted RMS log-gain error (fraction) over all rows."""
-        t = self.model_values(T)
-        e = np.log(np.abs(t)) - self.log_gain
-        w = self.w_gain**2
-        return float(np.sqrt(np.sum(w * e * e) / np.sum(w)))
-
-
-# ---------------------------------------------------------------------------
-# Model evaluation (runs in worker processes too)
-# ---------------------------------------------------------------------------
-
-
-@dataclass
-class Evaluator:
-    """Builds the model for a scale vector and returns its linear
-    transmissibility (nf, 30, ndir); picklable (plain inputs only)."""
-
-    base: dict  # ModelParams as a dict
-    measures: tuple  # (mass, stature, sitting height)
-    variant: str
-    free_names: list[str]
-    freqs: np.ndarray
-    directions: str
-    x_ref: np.ndarray | None = None
-    _free: list = field(default=None, repr=False)
-    _base: ModelParams = field(default=None, repr=False)
-
-    def setup(self) -> Evaluator:
-        from .parameters import load_registry
-
-        registry, _ = load_registry()
-        self._free = [registry[n] for n in self.free_names]
-        self._base = params_from_dict(self.base)
-        if self.x_ref is None:
-            self.x_ref = self.equilibrium(np.zeros(len(self._free)))
-        return self
-
-    def body(self) -> BodyMeasures:
-        return BodyMeasures(*self.measures)
-
-    def equilibrium(self, log_scales) -> np.ndarray:
-        """Static equilibrium state of the model with these scales."""
-        from ..diagram import build_diagram
-        from ..simulation import static_equilibrium
-
-        model = build_diagram(self.params(log_scales), self.body(), None, self.variant,
-                              guard=False, seat_forces=False)
-        ctx, smap = static_equilibrium(model)
-        return smap.get(ctx)
-
-    def params(self, log_scales) -> ModelParams:
-        return apply_scales(self._base, self._free, np.exp(log_scales))
-
-    def linear_model(self, log_scales, at_equilibrium: bool = False):
-        from ..analysis.linear import linearize
-        from ..diagram import build_diagram
-        from ..simulation import StateMap
-
-        params = self.params(log_scales)
-        model = build_diagram(params, self.body(), None, self.variant, guard=False,
-                              seat_forces=False)
-        if at_equilibrium:
-            return linearize(model, None, method="fd", outputs=["channels"])
-        ctx = model.diagram.CreateDefaultContext()
-        StateMap(model).set(ctx, self.x_ref)
-        return linearize(model, ctx, method="fd", outputs=["channels"])
-
-    def transmissibility(self, log_scales, at_equilibrium: bool = False):
-        """(T, stable)."""
-        lm = self.linear_model(log_scales, at_equilibrium)
-        return lm.transmissibility_array(self.freqs, self.directions), lm.is_stable
-
-
-_WORKER: dict = {}
-
-
-def _init_worker(evaluator: Evaluator, residuals: Residuals) -> None:
-    _WORKER["ev"] = evaluator.setup()
-    _WORKER["res"] = residuals
-
-
-def _worker_residual(task) -> np.ndarray:
-    """(log scales, the state to linearize about, or None for the
-    parameters' own static equilibrium) -> residual."""
-    log_scales, x_ref = task
-    if x_ref is None:
-        return _residual(_WORKER["ev"], _WORKER["res"], log_scales, at_equilibrium=True)
-    _WORKER["ev"].x_ref = x_ref
-    return _residual(_WORKER["ev"], _WORKER["res"], log_scales)
-
-
-def _residual(ev: Evaluator, res: Residuals, log_scales, at_equilibrium: bool = False
-              ) -> np.ndarray:
-    T, stable = ev.transmissibility(log_scales, at_equilibrium)
-    r = res(T)
-    if not stable:  # keep the optimizer in the stable region
-        r = r + UNSTABLE_PENALTY * np.sign(r + 1e-300) * np.abs(res.w_gain).max()
-    return r
-
-
-# ---------------------------------------------------------------------------
-# The fit
-# ---------------------------------------------------------------------------
 
 
 @dataclass
@@ -408,12 +217,18 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         measures: BodyMeasures = REFERENCE, variant: str = "default", workers: int = 2,
         progress: bool = True, max_evaluations: int = 400, ident_threshold: float = 0.033,
         phase_weight: float = 0.5, stages: int | str = "auto",
-        starts: tuple[str, ...] = STARTS) -> FitResult:
+        starts: tuple[str, ...] = STARTS, excitation: str = "separate",
+        band_hz: tuple[float, float] = tuple(BAND_HZ)) -> FitResult:
     """Identify the free parameters from measured transmissibility `frf`.
 
     `starts`: the descents to make (a name or names of `STARTS` and
     `OTHER_STARTS`; each costs about one fit);
-    the lower cost is kept and the report lists each one's."""
+    the lower cost is kept and the report lists each one's.
+    `excitation`: how the data were recorded, ``separate`` (one seat axis
+    per test) or ``simultaneous`` (the directions at a level excited
+    together, multiple-input estimates); `band_hz`: the excitation's band.
+    With the level of each row, they set the model's softening at the
+    data's level (`ehm_drake.identification.evaluation`)."""
     from ..params import load_params
 
     start = start or load_params()
@@ -424,35 +239,58 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
                        f"{list(STARTS + OTHER_STARTS)}")
     free_params = resolve_free(free) if not isinstance(free, list) else free
     warnings = check_fit_data(frf)
+    groups = excitation_groups(frf, excitation)
+    shares = path_shares(frf) if excitation == "simultaneous" else None
     train, held = split_holdout(frf, holdout)
-    res = Residuals.build(train, weights or {}, phase_weight)
-    held_res = Residuals.build(held, weights or {}, phase_weight) if held is not None else None
+
+    def build(part):
+        if part is None or not len(part):
+            return None
+        return Residuals.build(part, weights or {}, phase_weight, groups=groups, shares=shares)
+
+    res, held_res = build(train), build(held)
     freqs = np.unique(np.concatenate([res.freqs] + ([held_res.freqs] if held_res else [])))
     directions = "".join(d for d in "xyz" if d in set(frf.direction))
     # Residual layouts indexed into the common frequency grid and directions.
-    for r in filter(None, (res, held_res)):
-        r.row_f = np.searchsorted(freqs, r.freqs[r.row_f])
-        r.row_d = np.array([directions.index(k[0]) for k in r.keys])
-        r.freqs = freqs
-        r.directions = directions
+    res = res.reindexed(freqs, directions)
+    held_res = held_res.reindexed(freqs, directions) if held_res else None
     bounds = np.array([scale_bounds(start, fp) for fp in free_params])
     lo, hi = np.log(bounds[:, 0]), np.log(bounds[:, 1])
     ev = Evaluator(start.to_dict(), (measures.mass_kg, measures.stature_m,
                                      measures.resolved_sitting_height()),
-                   variant, [fp.name for fp in free_params], freqs, directions).setup()
+                   variant, [fp.name for fp in free_params], freqs, directions, groups,
+                   tuple(band_hz)).setup()
+    if any(math.isnan(g[1]) for g in groups) and any(s_ is not None for s_ in ev.rms):
+        warnings.append("rows without a level (level_rms) are compared with the model at "
+                        "rest: its softening with the vibration's magnitude left out there")
     x0 = np.zeros(len(free_params))
     T0, stable0 = ev.transmissibility(x0)
+    # Paths the model cannot produce (zero by its left-right symmetry, which
+    # every free parameter keeps) carry only estimation noise, whatever their
+    # coherence (with simultaneous axes it is the output's multiple
+    # coherence): left out, or their log error (ln of a rounding-level model
+    # gain) would swamp the cost and its Jacobian.
+    zero = structural_zeros(T0, directions)
+    if zero:
+        if len(drop_paths(train, zero)) == 0:
+            raise FitError("every path of the data is zero in the model (by its left-right "
+                           "symmetry): nothing to fit")
+        train, held = drop_paths(train, zero), drop_paths(held, zero)
+        res = build(train).reindexed(freqs, directions)
+        held_res = build(held)
+        held_res = held_res.reindexed(freqs, directions) if held_res else None
+        warnings.append(zero_paths_warning(zero, frf))
     r0 = res(T0)
     tracker = _Tracker(progress, 0.5 * float(r0 @ r0))
     tracker.record(x0, r0)
-    pool = process_pool(workers, _init_worker, (ev, res)) if workers > 1 else None
+    pool = process_pool(workers, init_worker, (ev, res)) if workers > 1 else None
     cache: dict = {}
 
     def fun(x):
         key = x.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = _residual(ev, res, x)
+            cache[key] = residual(ev, res, x)
             tracker.record(x, cache[key])
         return cache[key]
 
@@ -469,14 +307,14 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
               for j in range(len(x))]
         x_ref = None if own_equilibrium else ev.x_ref
         if pool is not None:
-            cols = list(pool.map(_worker_residual, [(xj, x_ref) for xj in xs]))
+            cols = list(pool.map(worker_residual, [(xj, x_ref, ev.rms) for xj in xs]))
         else:
-            cols = [_residual(ev, res, xj, at_equilibrium=own_equilibrium) for xj in xs]
+            cols = [residual(ev, res, xj, at_equilibrium=own_equilibrium) for xj in xs]
         tracker.n += len(xs)
         return np.column_stack([(c - f0) / (xj - x).sum() for c, xj in zip(cols, xs,
                                                                            strict=True)])
 
-    x_ref0 = ev.x_ref
+    x_ref0, rms0 = ev.x_ref, ev.rms
     n_stages = 2 if stages == "auto" else int(stages)
     nfev = max(10, max_evaluations // (len(x0) + 1))
     options = dict(bounds=(lo, hi), method="trf", x_scale=1.0, ftol=1e-3, xtol=1e-3,
@@ -487,8 +325,8 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
 
     def descend(x_start, phase: bool = True, gain: bool = True):
         """The staged fit from `x_start`: stage 1 linearizes about the
-        starting parameters' equilibrium; stage 2 about the stage-1
-        parameters' own equilibrium (contact stiffness moves it by
+        starting parameters' equilibrium and softening; stage 2 about the
+        stage-1 parameters' own (contact stiffness moves the equilibrium by
         millimetres), removing that bias.  Without `phase` (`gain`), the
         gain (phase) rows alone are fitted."""
         mask = np.where(gain_rows, float(gain), float(phase))
@@ -503,26 +341,38 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         for stage in range(n_stages):
             if stage > 0:
                 x_eq = ev.equilibrium(x_best)
-                if stages == "auto" and np.max(np.abs(x_eq - ev.x_ref)) < 2e-4:
-                    break  # the equilibrium barely moved: no bias to remove
-                ev.x_ref = x_eq
+                rms = ev.element_rms(x_best, x_eq, warm=ev.rms)
+                if stages == "auto" and np.max(np.abs(x_eq - ev.x_ref)) < 2e-4 \
+                        and _rms_change(rms, ev.rms) < 0.02:
+                    break  # equilibrium and softening barely moved: no bias to remove
+                ev.x_ref, ev.rms = x_eq, rms
             cache.clear()
             tracker.best_cost = 0.5 * float(fun(x_best) @ fun(x_best))
             tracker.best_x = x_best
+            n_before = tracker.n
             sol = least_squares(f, x_best, jac=jf, **options)
+            descents.append({"rows": "phase" if not gain else "gain" if not phase else "all",
+                             "stage": stage + 1, "evaluations": tracker.n - n_before,
+                             "iterations": int(sol.njev or 0),
+                             "cost": 0.5 * float(sol.fun @ sol.fun)})
             x_best = sol.x if not (phase and gain) \
                 or 0.5 * float(sol.fun @ sol.fun) <= tracker.best_cost \
                 else tracker.best_x
         return x_best
 
     def at_own_equilibrium(x):
-        """(cost, T, stable) of the model at its own static equilibrium."""
+        """(cost, T, stable, element RMS) of the model at its own static
+        equilibrium and its own softening at the data's levels."""
+        ev.rms = ev.element_rms(x, None, warm=ev.rms)
         T, stable = ev.transmissibility(x, at_equilibrium=True)
         r = res(T)
-        return 0.5 * float(r @ r), T, stable
+        return 0.5 * float(r @ r), T, stable, ev.rms
+
+    descents: list = []  # per optimizer run: rows fitted, stage, evaluations, cost
 
     def from_start(name):
-        ev.x_ref = x_ref0
+        ev.x_ref, ev.rms = x_ref0, rms0
+        descents.append({"start": name})
         if name == "plain":
             return descend(x0)
         if name == "phase first":
@@ -544,7 +394,7 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         # The final model at its own equilibrium, and the Jacobian there (for
         # the standard errors; see the module docstring).
         if ends:
-            x_best, _, (_, T_fit, stable) = min(ends, key=lambda e: e[2][0])
+            x_best, _, (_, T_fit, stable, ev.rms) = min(ends, key=lambda e: e[2][0])
         else:
             x_best = tracker.best_x
             T_fit, stable = ev.transmissibility(x_best, at_equilibrium=True)
@@ -568,9 +418,54 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
                    "free": [fp.name for fp in free_params], "variant": variant,
                    "data_rows_used": len(res.row_f),
                    "starts": [{"start": name, "cost": own[0], "scales": np.exp(x).tolist()}
-                              for x, name, own in ends]})
-    return FitResult(ev.params(x_best), start, free_params, np.exp(x_best), report, T0, T_fit,
-                     freqs, directions, interrupted)
+                              for x, name, own in ends],
+                   "descents": descents})
+    disagreement = starts_disagree(report)
+    if disagreement:
+        report["warnings"].append(disagreement)
+    report["excitation"] = {"kind": excitation, "band_hz": list(band_hz),
+                            "groups": [{"directions": d, "level_rms": None if math.isnan(lv)
+                                        else lv} for d, lv in groups]}
+    return FitResult(ev.params(x_best), start, free_params, np.exp(x_best), report,
+                     ev.per_direction(T0), ev.per_direction(T_fit), freqs, directions,
+                     interrupted)
+
+
+#: Starts agree when their costs are within this fraction of the lower and
+#: every parameter the data determine within this fraction of each other.
+STARTS_AGREE = 0.05
+
+
+def starts_disagree(report: dict) -> str:
+    """A warning when the starts ended in different places (local minima,
+    or a valley the data do not pin down), else ''."""
+    ends = report.get("starts", [])
+    if len(ends) < 2:
+        return ""
+    costs = np.array([e["cost"] for e in ends])
+    scales = np.array([e["scales"] for e in ends])
+    determined = np.array([p["identifiable"] for p in report["parameters"]])
+    spread = scales.max(axis=0) / scales.min(axis=0) - 1.0
+    apart = [(p["name"], s) for p, s, d in zip(report["parameters"], spread, determined,
+                                              strict=True) if d and s > STARTS_AGREE]
+    cost_gap = costs.max() / costs.min() - 1.0
+    if cost_gap <= STARTS_AGREE and not apart:
+        return ""
+    names = ", ".join(f"{n} {100 * s:.0f}%" for n, s in sorted(apart, key=lambda a: -a[1]))
+    return (f"the starts disagree: costs {', '.join(f'{c:.4g}' for c in costs)} "
+            f"({100 * cost_gap:.0f}% apart)" + (f"; determined parameters apart: {names}"
+                                                  if names else "")
+            + " (the lower cost is kept; a local minimum or a valley the data do not pin "
+              "down: more data or fewer free parameters)")
+
+
+def _rms_change(a: list, b: list) -> float:
+    """Largest relative change of the groups' element RMS movements."""
+    out = 0.0
+    for x, y in zip(a, b, strict=True):
+        if x is not None and y is not None:
+            out = max(out, float(np.max(np.abs(x - y) / np.maximum(np.abs(y), 1e-9))))
+    return out
 
 
 def _report(free, start, ev, x, bounds, J, r_fit, r0, res, T0, T_fit, held_res, stable,

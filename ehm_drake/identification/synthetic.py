@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..analysis.equivalent import SeatSpectrum, equivalent_linear
 from ..analysis.formats import FrfData
 from ..analysis.linear import default_frequencies, frf_from_array, linearize
 from ..diagram import build_diagram
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..params import ModelParams
-from ..systems.outputs import PAPER_CHANNELS
+from ..systems.outputs import CHANNEL_NAMES, PAPER_CHANNELS
 
 __all__ = ["PAPER_CHANNELS", "h1_noise_std", "synthetic_frf"]
 
@@ -27,12 +28,24 @@ def synthetic_frf(params: ModelParams, directions: str = "xyz", channels=None, f
                   measures: BodyMeasures = REFERENCE, level_rms: float | None = None) -> FrfData:
     """Linear-model transmissibility of `params` on the paper's channels, with
     log-normal gain and Gaussian phase noise of an H1 estimate at the given
-    coherence and number of averages (seeded)."""
+    coherence and number of averages (seeded).  With `level_rms` (m/s^2),
+    each direction is its own test at that level (flat 0.1-12 Hz) and the
+    model is the equivalent-linear one there (its softening); without, the
+    model at rest."""
     freqs = default_frequencies() if freqs is None else np.asarray(freqs, float)
-    lm = linearize(build_diagram(params, measures, None, guard=False, seat_forces=False),
-                   method="fd", outputs=["channels"])
-    frf = frf_from_array(lm.transmissibility_array(freqs, directions), freqs, directions,
-                         coherence)
+    model = build_diagram(params, measures, None, guard=False, seat_forces=False)
+    if level_rms is None:
+        T = linearize(model, method="fd", outputs=["channels"]).transmissibility_array(
+            freqs, directions)
+    else:
+        # One test per direction at the level: the model's softening there
+        # (`ehm_drake.analysis.equivalent`), as the fit compares it.
+        T = np.empty((len(freqs), len(CHANNEL_NAMES), len(directions)), complex)
+        for j, d in enumerate(directions):
+            lm = equivalent_linear(model, SeatSpectrum.flat(d, level_rms),
+                                   outputs=["channels"]).linear
+            T[:, :, j] = lm.transmissibility_array(freqs, d)[:, :, 0]
+    frf = frf_from_array(T, freqs, directions, coherence)
     chans = channels or PAPER_CHANNELS
     keep = np.zeros(len(frf), bool)
     for d in directions:
