@@ -304,6 +304,7 @@ def test_simultaneous_axes_weight_each_path_by_its_share():
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("fit_subject")  # (no module fixture: beside the other fits)
 def test_the_fit_finds_a_simulated_subject_again(tmp_path, params):
     """A subject made by the model with five parameters changed (lumbar
     stiffness x1.5, spine axial x1.4, pelvis-pan contact x1.3, neck damping
