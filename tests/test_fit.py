@@ -30,33 +30,28 @@ def recovery(params):
     return free, true, truth, data
 
 
-#: This descent ends in a local minimum 1.4% above the truth's cost (0.002481
-#: against 0.002447, each model at its own equilibrium and softening): hip
-#: stiffness x1.5 of the truth (flagged), thigh contact +14% and neck
-#: stiffness +12% beside it, which their standard errors (1.9%, 2.6%) do not
-#: reveal: issue "The fit finds the subject again".  (Before the fit compared
-#: the model at the data's level, with data of the model at rest: 1.2%
-#: above, thigh contact +16%.)
-LOCAL_MINIMUM = {"contact_thighs_stiffness": 0.20, "neck_stiffness": 0.15}
-
-
 @pytest.mark.slow
 def test_parameter_recovery(params, recovery):
     """The phase-first descent (the start that reaches the truth's basin;
-    both starts and the choice between them: `test_heldout_direction`)
-    recovers every parameter the data determine and flags the others."""
+    both starts and the choice between them: `test_heldout_direction`),
+    polished at the models' own equilibria, ends no higher than the truth's
+    own cost, recovers every parameter the data determine within 10% and
+    flags the others.  (Without the polish the stages' held linearization
+    point left the hip stiffness x1.7 of the truth, 4.6% above its cost.)"""
     free, true, truth, data = recovery
     result = fit(data, params, free, workers=2, progress=False, starts=("phase first",))
     r = result.report
     assert [s["start"] for s in r["starts"]] == ["phase first"]
     assert r["cost_after"] < 0.2 * r["cost_before"]
+    truth_cost = fit(data, truth, "his_kp", workers=1, progress=False, max_evaluations=1,
+                     stages=1, starts=("plain",)).report["cost_before"]
+    assert r["cost_after"] <= 1.01 * truth_cost
     identifiable = [p for p in r["parameters"] if p["identifiable"]]
     flagged = {u["name"] for u in r["not_identifiable"]}
     assert len(identifiable) >= 10
     for p, s in zip(r["parameters"], true, strict=True):
         if p["identifiable"]:
-            assert p["scale"] == pytest.approx(s, rel=LOCAL_MINIMUM.get(p["name"], 0.10)), \
-                p["name"]
+            assert p["scale"] == pytest.approx(s, rel=0.10), p["name"]
         else:
             assert p["name"] in flagged
     # Lumbar and hip stiffness trade off along the spine: the report says so.
@@ -80,7 +75,9 @@ def test_heldout_direction(heldout_fit):
     assert r["heldout_error"] <= 2.0 * r["train_error"]
     costs = {s["start"]: s["cost"] for s in r["starts"]}
     assert set(costs) == {"phase first", "plain"}
-    assert r["cost_after"] == pytest.approx(min(costs.values()), rel=1e-9)
+    # (The lower start is kept, then polished at its own equilibrium.)
+    assert r["cost_after"] <= min(costs.values()) * (1 + 1e-9)
+    assert r["descents"][-1]["stage"] == "own equilibrium"
     # Plain alone ends in a local minimum here (thigh contact x7.6, held-out
     # error 0.46): the phase-first start is what finds the truth's basin.
     assert costs["phase first"] < 0.5 * costs["plain"]
@@ -335,3 +332,20 @@ def test_the_fit_finds_a_simulated_subject_again(tmp_path, params):
     scales = {p["name"]: p["scale"] for p in r["parameters"]}
     for name, s in SUBJECT.items():
         assert scales[name] == pytest.approx(s, rel=0.15), name
+
+
+def test_broyden_update_predicts_the_step_and_changes_nothing_across_it():
+    """The later stages' and the polish's Jacobian update: after it the step
+    that was taken is predicted exactly, and directions orthogonal to the
+    step keep their old derivatives (the least change)."""
+    from ehm_drake.identification.fit import broyden
+
+    rng = np.random.default_rng(0)
+    J = rng.normal(size=(7, 4))
+    dx, df = rng.normal(size=4), rng.normal(size=7)
+    J1 = broyden(J, dx, df)
+    assert np.allclose(J1 @ dx, df, atol=1e-12)
+    across = rng.normal(size=4)
+    across -= (across @ dx) / (dx @ dx) * dx
+    assert np.allclose(J1 @ across, J @ across, atol=1e-12)
+    assert np.linalg.matrix_rank(J1 - J) == 1

@@ -149,6 +149,39 @@ def test_equivalent_linear_softens_with_level():
     assert lo.iterations == 1 and _am_peak(hi.linear) == pytest.approx(_am_peak(lo.linear))
 
 
+def test_springs_fed_back_are_the_model_linearized_at_those_movements(default_at_rest):
+    # The equivalent-linear iteration linearizes once and changes the
+    # elements' springs by feeding their force back (`with_springs`): at
+    # other RMS movements that is the model linearized there, to the
+    # finite differences' accuracy, whichever way the springs move.
+    from ehm_drake.analysis.equivalent import softening_columns, with_springs
+    from ehm_drake.analysis.linear import FD_STEP
+    from ehm_drake.model.softening import element_spring
+
+    model, ctx = default_at_rest
+    soft = model.systems["body_softening"]
+    sctx = soft.GetMyMutableContextFromRoot(ctx)
+    el = soft.elements
+    f = default_frequencies()
+    ports = ["channels", "softening_deformation"]
+    try:
+        s0 = np.full(el.n, 2e-4)
+        soft.set_rms(sctx, s0)
+        lin0 = linearize(model, ctx, outputs=ports)
+        cols = softening_columns(model, ctx, lin0, FD_STEP)
+        for s in (np.full(el.n, 1e-3), np.full(el.n, 2e-5)):
+            soft.set_rms(sctx, s)
+            fresh = linearize(model, ctx, outputs=ports)
+            fed = with_springs(lin0, cols, element_spring(el, s) - element_spring(el, s0))
+            T1, T2 = fed.transmissibility_array(f, "xz"), fresh.transmissibility_array(f, "xz")
+            T0 = lin0.transmissibility_array(f, "xz")
+            scale = np.max(np.abs(T2))
+            assert np.max(np.abs(T0 - T2)) > 0.02 * scale  # the springs matter here
+            assert np.max(np.abs(T1 - T2)) < 1e-6 * scale
+    finally:
+        soft.set_rms(sctx, None)
+
+
 def test_spectrum_rms():
     assert SeatSpectrum.flat("z", 0.7, (0.5, 20.0)).rms[2] == pytest.approx(0.7, rel=1e-9)
     assert SeatSpectrum.sine("x", 3.0, 0.4).rms[0] == pytest.approx(0.4)

@@ -447,7 +447,12 @@ def linearize_system(diagram, root_context, output_ports, h: float, method: str 
             if method == "autodiff":
                 raise LinearizationError(f"AutoDiff linearization not possible: {e}") from None
     if used is None:
-        A, B, C, D = _linearize_fd(diagram, root_context, smap, output_ports, fd_step, central)
+        # A restraint's slip anchor moves only at its force limit: the
+        # input-output map and the modes leave the anchors out
+        # (`LinearModel._reduced`), so their columns are not evaluated.
+        held = [i for i, n in enumerate(state_names or ()) if n.startswith("slip:")]
+        A, B, C, D = _linearize_fd(diagram, root_context, smap, output_ports, fd_step, central,
+                                   held=held)
         used = "fd"
         smap.set(root_context, x0)
         a_port.FixValue(root_context, np.zeros(3))
@@ -466,12 +471,14 @@ def linearize_system(diagram, root_context, output_ports, h: float, method: str 
     return LinearModel(A, B, C, D, h, names, out_names, x0, y0, state_groups, out_groups, used)
 
 
-def _linearize_fd(diagram, ctx, smap, ports, eps, central=True, inputs=None):
+def _linearize_fd(diagram, ctx, smap, ports, eps, central=True, inputs=None, held=()):
     """Central (or forward: half the cost, O(eps) error) differences.
 
     `inputs`: [(input port name, FD step)] to differentiate with respect to
     (default: the seat acceleration, step `INPUT_FD_STEP`); other input
-    ports keep their fixed values.  Returns A, B (inputs stacked), C, D."""
+    ports keep their fixed values.  `held`: state indices whose columns are
+    not evaluated but set to a held state (A: the unit column, C: 0), for
+    states the caller leaves out.  Returns A, B (inputs stacked), C, D."""
     inputs = inputs or [("seat_acceleration", INPUT_FD_STEP)]
     in_ports = [diagram.GetInputPort(name) for name, _ in inputs]
     u0s = [p.Eval(ctx) for p in in_ports]
@@ -489,13 +496,19 @@ def _linearize_fd(diagram, ctx, smap, ports, eps, central=True, inputs=None):
         return smap.step(ctx), np.concatenate([diagram.GetOutputPort(p).Eval(ctx) for p in ports])
 
     cols_x, cols_y = [], []
+    ny = sum(diagram.GetOutputPort(p).size() for p in ports)
     if not central:
         xc, yc = evaluate(x0, u0)
     # The seat input is perturbed by 1 m/s^2: its effect on one step (h * 1
     # m/s) must stand well above SAP's solution tolerance (~1e-8 m/s), and
     # the model is linear in it (inertial load) anyway.
     steps = np.r_[np.full(n, eps), np.repeat([step for _, step in inputs], sizes)]
+    held = set(held)
     for j in range(n + m):
+        if j in held:
+            cols_x.append(np.eye(n)[j])
+            cols_y.append(np.zeros(ny))
+            continue
         ep = np.zeros(n + m)
         ep[j] = steps[j]
         e = steps[j]

@@ -333,7 +333,6 @@ class Evaluator:
         """Each group's element RMS movements at its level, the model with
         these scales linearized about `x_ref` (None: its own equilibrium);
         None for a group without a level or a model without softening."""
-        from ..analysis.equivalent import EquivalentLinearError, SeatSpectrum, equivalent_linear
         from ..simulation import StateMap
 
         model = self._model(log_scales)
@@ -344,6 +343,24 @@ class Evaluator:
         else:
             ctx = model.diagram.CreateDefaultContext()
             StateMap(model).set(ctx, x_ref)
+        return self._element_rms(model, ctx, warm)
+
+    def own(self, log_scales, warm: list | None = None):
+        """(T, stable, each group's element RMS movements) of the model
+        with these scales at its own static equilibrium and its own
+        softening at the groups' levels (`warm`: RMS movements to start
+        from)."""
+        model = self._model(log_scales)
+        ctx = self._context(model, True)
+        rms = ([None] * len(self.groups) if model.systems.get("body_softening") is None
+               else self._element_rms(model, ctx, warm))
+        lms = self._linear_models(model, ctx, rms)
+        T = np.stack([lm.transmissibility_array(self.freqs, self.directions) for lm in lms])
+        return T, all(lm.is_stable for lm in lms), rms
+
+    def _element_rms(self, model, ctx, warm) -> list:
+        from ..analysis.equivalent import EquivalentLinearError, SeatSpectrum, equivalent_linear
+
         out = []
         for g, (dirs, level) in enumerate(self.groups):
             if not math.isfinite(level):
@@ -361,15 +378,17 @@ class Evaluator:
     def linear_models(self, log_scales, at_equilibrium: bool = False) -> list:
         """One linear model per excitation group (shared where their RMS
         movements are the same)."""
+        model = self._model(log_scales)
+        return self._linear_models(model, self._context(model, at_equilibrium), self.rms)
+
+    def _linear_models(self, model, ctx, rms) -> list:
         from ..analysis.linear import linearize
 
-        model = self._model(log_scales)
-        ctx = self._context(model, at_equilibrium)
         soft = model.systems.get("body_softening")
         sctx = soft.GetMyMutableContextFromRoot(ctx) if soft is not None else None
         made: dict = {}
         out = []
-        for s in (self.rms or [None] * len(self.groups)):
+        for s in (rms or [None] * len(self.groups)):
             key = None if s is None or soft is None else np.asarray(s).tobytes()
             if key not in made:
                 if soft is not None:

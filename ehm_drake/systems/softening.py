@@ -19,7 +19,9 @@ Numeric parameter: ``rms_fixed`` per element, the RMS movement to use in
 place of the running one when >= 0 (the equivalent-linear models freeze it
 at a test's level; -1 = the running value), then ``active`` (1; 0 while the
 static equilibrium is solved, when the running means are not yet where the
-body rests).
+body rests), then ``force_offset`` per element (N or N m, 0: a force added
+to the element's law, which the equivalent-linear iteration perturbs to
+find how the element's force moves the body, `ehm_drake.analysis.equivalent`).
 
 Each element applies, about its running mean, the stiffness
 `element_spring` gives: a tissue element its short-range stiffness on the
@@ -70,10 +72,11 @@ def BodySoftening_(T):
             self._geometry = RestraintGeometry(p, points) if len(points) else None
             self._ball = _BallIndex(layout)
             self._alpha = float(period) / elements.time_constant
+            self._last_spring = (None, None)
             n = elements.n
             self._state_port = self.DeclareVectorInputPort("state", self._nq + self._nv)
             self._param = self.DeclareNumericParameter(
-                BasicVector_[T](np.append(np.full(n, -1.0), 1.0)))
+                BasicVector_[T](np.concatenate([np.full(n, -1.0), [1.0], np.zeros(n)])))
             self._stats = self.DeclareDiscreteState(2 * n)
             self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
             # The kinematics once per state (the force, the seat forces and the
@@ -120,7 +123,7 @@ def BodySoftening_(T):
             """Switch the forces on or off in this system's `context`."""
             prm = context.get_mutable_numeric_parameter(self._param)
             v = prm.CopyToVector()
-            v[-1] = 1.0 if active else 0.0
+            v[self._elements.n] = 1.0 if active else 0.0
             prm.SetFromVector(v)
 
         def set_rms(self, context, rms) -> None:
@@ -128,7 +131,16 @@ def BodySoftening_(T):
             value) in this system's `context`."""
             prm = context.get_mutable_numeric_parameter(self._param)
             v = prm.CopyToVector()
-            v[:-1] = -1.0 if rms is None else np.asarray(rms, float)
+            v[:self._elements.n] = -1.0 if rms is None else np.asarray(rms, float)
+            prm.SetFromVector(v)
+
+        def set_force_offset(self, context, offset) -> None:
+            """Add `offset` (per element, N or N m; None: none) to each
+            element's force in this system's `context`."""
+            prm = context.get_mutable_numeric_parameter(self._param)
+            v = prm.CopyToVector()
+            n = self._elements.n
+            v[n + 1:] = 0.0 if offset is None else np.asarray(offset, float)
             prm.SetFromVector(v)
 
         def rest_deformation(self, context) -> np.ndarray:
@@ -170,17 +182,25 @@ def BodySoftening_(T):
             return equivalent_loss(self._elements, rms), mean
 
         def _spring(self, context):
-            """(stiffness about the running mean per element, the means)."""
+            """(stiffness about the running mean per element, the means, the
+            force offsets)."""
             return self._springs.Eval(context)
 
         def _calc_spring(self, context):
             rms, mean, active = self._rms(context)
-            return active * element_spring(self._elements, rms), mean
+            # The springs of the last RMS movements again (a linearization
+            # freezes them, and moves the state, which the cache follows).
+            key = (rms.tobytes(), active) if T is float else None
+            if key is None or key != self._last_spring[0]:
+                self._last_spring = (key, active * element_spring(self._elements, rms))
+            n = self._elements.n
+            offset = context.get_numeric_parameter(self._param).CopyToVector()[n + 1:]
+            return self._last_spring[1], mean, offset
 
         def _calc_force(self, context, output):
             d, Jn, touching = self._deformation(context)
-            k, mean = self._spring(context)
-            f_el = -k * (d - mean)
+            k, mean, offset = self._spring(context)
+            f_el = offset - k * (d - mean)
             force = np.zeros(self._nv, dtype=f_el.dtype)
             nt = self._n_tissue
             if nt:  # (Jn's rows and the forces in point order)
@@ -195,9 +215,9 @@ def BodySoftening_(T):
         def _tissue_forces(self, context):
             """The tissue elements' normal force on the body (point order)."""
             d, _, touching = self._deformation(context)
-            k, mean = self._spring(context)
+            k, mean, offset = self._spring(context)
             nt = self._n_tissue
-            return -k[:nt] * (d[:nt] - mean[:nt]) * touching
+            return (offset[:nt] - k[:nt] * (d[:nt] - mean[:nt])) * touching
 
         def _calc_seat_forces(self, context, output):
             if not self._n_tissue:
