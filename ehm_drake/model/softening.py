@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -118,7 +119,15 @@ class ElementSet:
 
     def series_compliance(self) -> np.ndarray:
         """1/k_s of the seat under each element (0: rigid, and for muscles)."""
-        return np.maximum(1.0 / self.k_rest - 1.0 / self.k_tissue, 0.0)
+        return self._constants[0]
+
+    @cached_property
+    def _constants(self):
+        """(series compliance, long-range stiffness, tissue mask): what the
+        laws read at every step, once per element set."""
+        c = np.maximum(1.0 / self.k_rest - 1.0 / self.k_tissue, 0.0)
+        k_inf = self.k_tissue * (1.0 - self.max_loss)
+        return c, 1.0 / (1.0 / k_inf + c), np.array([k == "tissue" for k in self.kinds])
 
 
 def element_set(params, points=(), layout=None) -> ElementSet:
@@ -193,8 +202,7 @@ def long_range_stiffness(elements: ElementSet) -> np.ndarray:
     """Each element's stiffness once movement has taken all it can: the
     tissue's k_t0 (1 - r) in series with the seat (N/m); for muscles the
     same k0 (1 - r)."""
-    k_inf = elements.k_tissue * (1.0 - elements.max_loss)
-    return 1.0 / (1.0 / k_inf + elements.series_compliance())
+    return elements._constants[1]
 
 
 def element_spring(elements: ElementSet, s):
@@ -203,8 +211,8 @@ def element_spring(elements: ElementSet, s):
     contact's long-range stiffness, k_p(s) - k_p(inf) (>= 0); for muscles
     minus the loss (<= 0)."""
     loss = equivalent_loss(elements, s)
-    tissue = np.array([k == "tissue" for k in elements.kinds])
-    return np.where(tissue, elements.k_rest - long_range_stiffness(elements) - loss, -loss)
+    _, k_long, tissue = elements._constants
+    return np.where(tissue, elements.k_rest - k_long - loss, -loss)
 
 
 def long_range_contacts(params):

@@ -175,6 +175,19 @@ class RestraintGeometry:
         return (J, self.A_grouped @ pos - self.a0, self.A_grouped @ vel,
                 self.N_grouped @ pos - self.n0, self.N_grouped @ vel, p_pts, v_pts)
 
+    def normal_kinematics(self, plant, context):
+        """The points' displacement along their normals from the anchors
+        (n, as `kinematics`) and the normal rows of their Jacobian (n x nv),
+        at the plant `context`: the part of `kinematics` a normal law needs."""
+        kv = JacobianWrtVariable.kV
+        world = self.world
+        pos = np.concatenate([plant.CalcPointsPositions(context, frame, P_B, world).T.reshape(-1)
+                              for frame, P_B, _ in self.groups])
+        J = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, P_B,
+                                                                    world, world)
+                            for frame, P_B, _ in self.groups])
+        return self.N_grouped @ pos - self.n0, self.N_grouped @ J
+
     def contact_points(self, plant, context) -> list:
         """Each group's contact points in its body's frame (3 x k), at
         the plant `context` (`contact_points_B`)."""

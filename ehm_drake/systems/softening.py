@@ -161,8 +161,7 @@ def BodySoftening_(T):
             if self._geometry is not None:
                 g = self._geometry
                 ctx = self._scratch.set_state(x)
-                J, _, _, pos_n, _, _, _ = g.kinematics(self._scratch.plant, ctx, x[self._nq:])
-                Jn = g.N_grouped @ J
+                pos_n, Jn = g.normal_kinematics(self._scratch.plant, ctx)
                 parts.append(pos_n)
                 touching = in_contact(g.face, pos_n)
             if len(self._muscle):
