@@ -172,8 +172,7 @@ def equivalent_linear(model, spectrum: SeatSpectrum, root_context=None, outputs=
     s = np.zeros(elements.n) if rms_start is None else np.asarray(rms_start, float).copy()
     warm = rms_start is not None
     relax, last = 0.5, np.inf
-    active = soft.GetMyContextFromRoot(root_context).get_numeric_parameter(
-        soft.parameter_index).GetAtIndex(elements.n)
+    active = soft.active(soft.GetMyContextFromRoot(root_context))
     try:
         soft.set_rms(sctx, s)
         lin0 = linearize(model, root_context, method="fd", fd_step=step, outputs=ports)

@@ -435,8 +435,13 @@ def worker_residual(task) -> np.ndarray:
 
 def residual(ev: Evaluator, res: Residuals, log_scales, at_equilibrium: bool = False
              ) -> np.ndarray:
-    T, stable = ev.transmissibility(log_scales, at_equilibrium)
+    return penalized(res, *ev.transmissibility(log_scales, at_equilibrium))
+
+
+def penalized(res: Residuals, T: np.ndarray, stable: bool) -> np.ndarray:
+    """The residual of `T`, pushed away from an unstable model (keeps the
+    optimizer in the stable region)."""
     r = res(T)
-    if not stable:  # keep the optimizer in the stable region
+    if not stable:
         r = r + UNSTABLE_PENALTY * np.sign(r + 1e-300) * np.abs(res.w_gain).max()
     return r

@@ -78,7 +78,6 @@ from ..params import ModelParams, ParameterError, save_params
 from ..progress import Progress
 from ..signals import BAND_HZ
 from .evaluation import (
-    UNSTABLE_PENALTY,
     Evaluator,
     FitError,
     Residuals,
@@ -86,6 +85,7 @@ from .evaluation import (
     excitation_groups,
     init_worker,
     path_shares,
+    penalized,
     residual,
     structural_zeros,
     worker_residual,
@@ -321,7 +321,8 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         """Finite-difference Jacobian about the current linearization state
         `ev.x_ref`, or each column at its parameters' own equilibrium."""
         key = None if own_equilibrium else (x.tobytes(), ev.x_ref.tobytes(),
-                                            repr(ev.rms))
+                                            *(None if s_ is None else s_.tobytes()
+                                              for s_ in (ev.rms or ())))
         if key is not None and key == latest["key"]:
             return latest["J"]
         f0 = fun(x) if f0 is None else f0
@@ -366,15 +367,10 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         # differenced Jacobian and updates it by Broyden's rule from the
         # residuals the descent evaluates (the final Jacobian, for the
         # standard errors, is differenced in full).
-        secant: dict = {}
+        secant = None
 
         def jf_secant(x):
-            fx = fun(x)
-            if secant.get("x") is not None and not np.array_equal(x, secant["x"]):
-                dx = x - secant["x"]
-                secant["J"] = broyden(secant["J"], dx, fx - secant["f"])
-            secant.update(x=x, f=fx)
-            return secant["J"] * mask[:, None]
+            return secant(x, fun(x)) * mask[:, None]
 
         x_best = x_start
         for stage in range(n):
@@ -389,15 +385,12 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
             tracker.best_cost = 0.5 * float(fun(x_best) @ fun(x_best))
             tracker.best_x = x_best
             n_before, t0 = tracker.n, time.perf_counter()
-            if stage > 0 and latest["J"] is not None:
-                secant.update(J=latest["J"], x=None)
-            sol = least_squares(f, x_best, jac=jf if stage == 0 or not secant else jf_secant,
-                                **options)
+            secant = Secant(latest["J"]) if stage > 0 and latest["J"] is not None else None
+            sol = least_squares(f, x_best, jac=jf if secant is None else jf_secant, **options)
             descents.append({"rows": "phase" if not gain else "gain" if not phase else "all",
                              "stage": stage + 1, "evaluations": tracker.n - n_before,
                              "iterations": int(sol.njev or 0),
-                             "jacobian": "differences" if stage == 0 or not secant
-                             else "secant",
+                             "jacobian": "differences" if secant is None else "secant",
                              "seconds": time.perf_counter() - t0,
                              "cost": 0.5 * float(sol.fun @ sol.fun)})
             x_best = sol.x if not (phase and gain) \
@@ -422,26 +415,19 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
         better.  Broyden's rule updates `J`.  Returns (x, (cost, T, stable,
         element RMS)) of the lower cost."""
         seen: dict = {}
-        secant = {"x": x, "f": r, "J": J}
+        secant = Secant(J, x, r)
 
         def f_own(xx):
             key = xx.tobytes()
             if key not in seen:
                 T, stable, rms = ev.own(xx, warm=ev.rms)
-                rr = res(T)
-                if not stable:
-                    rr = rr + UNSTABLE_PENALTY * np.sign(rr + 1e-300) * np.abs(res.w_gain).max()
+                rr = penalized(res, T, stable)
                 seen[key] = (rr, (0.5 * float(rr @ rr), T, stable, rms))
                 tracker.record(xx, rr)
             return seen[key][0]
 
         def jac_own(xx):
-            fx = f_own(xx)
-            if not np.array_equal(xx, secant["x"]):
-                dx = xx - secant["x"]
-                secant["J"] = broyden(secant["J"], dx, fx - secant["f"])
-                secant.update(x=xx, f=fx)
-            return secant["J"]
+            return secant(xx, f_own(xx))
 
         seen[x.tobytes()] = (r, None)
         n_before, t0 = tracker.n, time.perf_counter()
@@ -560,6 +546,23 @@ def broyden(J: np.ndarray, dx: np.ndarray, df: np.ndarray) -> np.ndarray:
     that changed the residual by `df`: the least change of `J` that
     predicts `df` exactly."""
     return J + np.outer(df - J @ dx, dx) / float(dx @ dx)
+
+
+class Secant:
+    """A Jacobian kept up to date by `broyden` along the points a descent
+    evaluates: called with a point and its residual, it returns the
+    Jacobian there (updated from the last point, if any and different)."""
+
+    def __init__(self, J: np.ndarray, x: np.ndarray | None = None,
+                 f: np.ndarray | None = None):
+        self.J, self.x, self.f = J, x, f
+
+    def __call__(self, x: np.ndarray, f: np.ndarray) -> np.ndarray:
+        if self.x is not None and not np.array_equal(x, self.x):
+            self.J = broyden(self.J, x - self.x, f - self.f)
+        if self.x is None or not np.array_equal(x, self.x):
+            self.x, self.f = x, f
+        return self.J
 
 
 def starts_disagree(report: dict) -> str:

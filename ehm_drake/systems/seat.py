@@ -159,13 +159,7 @@ class RestraintGeometry:
         the normals (n each); the points' positions and velocities in point
         order (n x 3), at the plant `context` with generalized velocities
         `v`."""
-        kv = JacobianWrtVariable.kV
-        world = self.world
-        pos = np.concatenate([plant.CalcPointsPositions(context, frame, P_B, world).T.reshape(-1)
-                              for frame, P_B, _ in self.groups])
-        J = np.vstack([plant.CalcJacobianTranslationalVelocity(context, kv, frame, P_B, world,
-                                                               world)
-                       for frame, P_B, _ in self.groups])
+        pos, J = self._positions_and_jacobian(plant, context)
         vel = J @ v
         # Rows are grouped per body; the projection matrices are permuted
         # to match once at construction.
@@ -179,6 +173,12 @@ class RestraintGeometry:
         """The points' displacement along their normals from the anchors
         (n, as `kinematics`) and the normal rows of their Jacobian (n x nv),
         at the plant `context`: the part of `kinematics` a normal law needs."""
+        pos, J = self._positions_and_jacobian(plant, context)
+        return self.N_grouped @ pos - self.n0, self.N_grouped @ J
+
+    def _positions_and_jacobian(self, plant, context):
+        """The points' stacked positions (3n, body by body) and translational
+        Jacobian (3n x nv), in the world."""
         kv = JacobianWrtVariable.kV
         world = self.world
         pos = np.concatenate([plant.CalcPointsPositions(context, frame, P_B, world).T.reshape(-1)
@@ -186,7 +186,7 @@ class RestraintGeometry:
         J = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, P_B,
                                                                     world, world)
                             for frame, P_B, _ in self.groups])
-        return self.N_grouped @ pos - self.n0, self.N_grouped @ J
+        return pos, J
 
     def contact_points(self, plant, context) -> list:
         """Each group's contact points in its body's frame (3 x k), at

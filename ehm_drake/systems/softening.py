@@ -169,15 +169,22 @@ def BodySoftening_(T):
             return np.concatenate(parts), Jn, touching
 
         def _rms(self, context):
+            """(RMS movement per element, running means, active, force
+            offsets)."""
             n = self._elements.n
             stats = context.get_discrete_state(self._stats).CopyToVector()
             prm = context.get_numeric_parameter(self._param).CopyToVector()
             fixed = prm[:n]
             running = stationary_rms(stats[n:])
-            return np.where(fixed >= 0, fixed, running), stats[:n], prm[n]
+            return np.where(fixed >= 0, fixed, running), stats[:n], prm[n], prm[n + 1:]
+
+        def active(self, context) -> float:
+            """1 while the forces act, 0 while they are off (`set_active`), in
+            this system's `context`."""
+            return self._rms(context)[2]
 
         def _loss(self, context):
-            rms, mean, _ = self._rms(context)
+            rms, mean, _, _ = self._rms(context)
             return equivalent_loss(self._elements, rms), mean
 
         def _spring(self, context):
@@ -186,14 +193,12 @@ def BodySoftening_(T):
             return self._springs.Eval(context)
 
         def _calc_spring(self, context):
-            rms, mean, active = self._rms(context)
+            rms, mean, active, offset = self._rms(context)
             # The springs of the last RMS movements again (a linearization
             # freezes them, and moves the state, which the cache follows).
             key = (rms.tobytes(), active) if T is float else None
             if key is None or key != self._last_spring[0]:
                 self._last_spring = (key, active * element_spring(self._elements, rms))
-            n = self._elements.n
-            offset = context.get_numeric_parameter(self._param).CopyToVector()[n + 1:]
             return self._last_spring[1], mean, offset
 
         def _calc_force(self, context, output):
