@@ -11,7 +11,7 @@ such removal (0 when no candidate has a negative delta BIC, or the pass did
 not run): the rule's statistic under the null.  This script collects it
 from blind runs made without a reference group, e.g.
 
-    ehm-drake blind --reality lumped --trials 30 --p-none 1 --seed S \\
+    ehm-drake blind --reality lumped --trials 30 --p-none 1 --p-two 0 --seed S \\
         --directions x,z --levels 0.3,0.6 --duration 120 --out RUN
     python bench/single_subject_null.py RUN [RUN ...] [--alpha 0.1] [--out null.json]
 

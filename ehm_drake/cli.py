@@ -98,8 +98,8 @@ def _load_model_params(args):
 
 
 def cmd_simulate(args) -> int:
-    from .diagram import build_diagram
-    from .plots import plot_posture, plot_responses
+    from .analysis.figures import plot_cases
+    from .plots import plot_responses
     from .signals import make_seat_signal
     from .simulation import SettledState, settle, vibrate
 
@@ -113,24 +113,77 @@ def cmd_simulate(args) -> int:
         args.excitation, args.direction, args.rms, args.duration, args.seed, s.time_step_s,
         s.settle_time_s, s.onset_time_s, frequency_hz=args.frequency, csv_path=args.csv)
     progress = not args.quiet
+    figures = not args.no_figures
+    wall = {}
     t0 = time.perf_counter()
     if args.settled:
         settled = SettledState.load(args.settled)
     else:
         settled = settle(params, measures, args.variant, progress=progress)
-    settle_wall = time.perf_counter() - t0
+    wall["settle"] = time.perf_counter() - t0
     settled.save(out / "settled_state.npz")
+    t = time.perf_counter()
     result = vibrate(params, settled, signal, measures, args.variant, progress=progress)
+    wall["vibrate"] = time.perf_counter() - t
     handle_viz(args, params, measures, result)
+    t = time.perf_counter()
     files = [p.name for p in result.write_csv(out)]
-    model = build_diagram(params, measures, None, args.variant, guard=False)
+    wall["write"] = time.perf_counter() - t
+    summary = _simulate_summary(args, params, measures, signal, settled, result)
+    frf = None
+    if signal.kind != "csv" or signal.meta.get("direction"):
+        t = time.perf_counter()
+        frf = _transmissibility_outputs(result, signal, out, files, summary)
+        wall["analysis"] = time.perf_counter() - t
+    if figures:
+        t = time.perf_counter()
+        files.append(posture_figure(params, measures, args.variant, settled.positions,
+                                    out / "posture.png").name)
+        files.append(plot_responses(result, out / "responses.png").name)
+        if frf is not None:
+            files += [p.name for p in plot_cases({args.variant: frf}, out)]
+        wall["figures"] = time.perf_counter() - t
+    wall["total (after imports)"] = time.perf_counter() - t0
+    summary["settle_wall_s"] = wall["settle"]
+    summary["wall_s"] = wall
+    summary["files"] = sorted(files)
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    if not args.quiet:
+        _print_summary(summary)
+    if args.verbose:
+        _print_wall(wall, result, s.time_step_s)
+    return 0
+
+
+def posture_figure(params, measures, variant, settled_positions, path) -> Path:
+    """posture.png of `simulate`: the settled posture on the initial one."""
+    from .diagram import build_diagram
+    from .plots import plot_posture
+
+    model = build_diagram(params, measures, None, variant, guard=False)
     ref = model.plant.GetPositions(model.plant.CreateDefaultContext())
-    files.append(plot_posture(
-        model, {f"settled ({args.variant})": settled.positions,
-                "initial (reference)": ref},
-        out / "posture.png", f"Posture after settling, variant {args.variant}").name)
-    files.append(plot_responses(result, out / "responses.png").name)
-    summary = {
+    return plot_posture(model, {f"settled ({variant})": settled_positions,
+                                "initial (reference)": ref},
+                        path, f"Posture after settling, variant {variant}")
+
+
+def _print_wall(wall: dict, result, time_step: float) -> None:
+    """--verbose: where the command's time went (wall clock, s), and the
+    run's cost per time step."""
+    print("wall clock (s): " + ", ".join(f"{k} {v:.2f}" for k, v in wall.items()))
+    steps = round(result.meta["simulated_s"] / time_step)
+    if steps > 0:
+        print(f"vibration run: {1e6 * wall['vibrate'] / steps:.0f} us per time step "
+              f"({steps} steps of {1e3 * time_step:g} ms), real-time factor "
+              f"{result.meta['real_time_factor']:.2f}")
+
+
+def _simulate_summary(args, params, measures, signal, settled, result) -> dict:
+    from .diagram import build_diagram
+
+    s = params.simulation
+    model = build_diagram(params, measures, None, args.variant, guard=False)
+    return {
         "dof": int(model.plant.num_velocities()),
         "segments": len(model.hp.body.segments),
         "mass_kg": float(model.hp.body.total_mass),
@@ -143,25 +196,17 @@ def cmd_simulate(args) -> int:
         "excitation": signal.meta,
         "seat_rms_measured": dict(zip("xyz", map(float, signal.rms()), strict=True)),
         "real_time_factor": result.meta["real_time_factor"],
-        "settle_wall_s": settle_wall,
         "vibrate_wall_s": result.meta["wall_s"],
         **{k: settled.summary[k] for k in (
             "settle_posture_error_deg", "head_pitch_drift_deg", "head_pitch_deg",
             "trunk_T8_forward_drift_m", "backrest_force_n", "back_in_contact")},
     }
-    if signal.kind != "csv" or signal.meta.get("direction"):
-        summary.update(_transmissibility_outputs(result, signal, out, files))
-    summary["files"] = sorted(files)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    if not args.quiet:
-        _print_summary(summary)
-    return 0
 
 
-def _transmissibility_outputs(result, signal, out: Path, files: list) -> dict:
-    """frf.csv, apparent_mass.csv and the transmissibility figures of a run."""
+def _transmissibility_outputs(result, signal, out: Path, files: list, summary: dict):
+    """frf.csv and apparent_mass.csv of a run, their entries in `summary`;
+    returns the FRF."""
     from .analysis.apparent_mass import apparent_mass_table
-    from .analysis.figures import plot_cases
     from .analysis.transmissibility import transmissibility
 
     vib = result.after(signal.settle_time)
@@ -172,9 +217,8 @@ def _transmissibility_outputs(result, signal, out: Path, files: list) -> dict:
     am = apparent_mass_table(vib.seat_acceleration, vib.pan_force(), vib.sample_rate, dirs)
     am.to_csv(out / "apparent_mass.csv")
     files.append("apparent_mass.csv")
-    files += [p.name for p in plot_cases({result.meta["variant"]: frf}, out)]
-    return {"transmissibility_peaks": _peaks(frf),
-            "static_seated_mass_kg": am.static_mass_kg}
+    summary.update(transmissibility_peaks=_peaks(frf), static_seated_mass_kg=am.static_mass_kg)
+    return frf
 
 
 def _peaks(frf) -> dict:
@@ -501,6 +545,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--force", action="store_true", help="write into an existing folder")
     p.add_argument("--quiet", action="store_true", help="no progress or summary on screen")
+    p.add_argument("--no-figures", action="store_true",
+                   help="write the data only, no PNG figures (they take about 4 s)")
+    p.add_argument("--verbose", action="store_true",
+                   help="print where the command's time went (settle, vibrate, writing, "
+                   "analysis, figures) and the run's cost per time step")
     add_viz_arguments(p)
     p.set_defaults(func=cmd_simulate)
 

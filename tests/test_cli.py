@@ -50,6 +50,33 @@ def test_restart_from_settled_state(sim_dir, tmp_path):
                  "--out", str(out), "--quiet"]) == 0
 
 
+def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tmp_path, capsys):
+    """--no-figures leaves out the PNGs only: the data files are the same
+    bytes; --verbose prints the command's wall-clock split, whose parts
+    sum to at most the total, and the cost per time step."""
+    runs = {}
+    for name, extra in (("with", []), ("without", ["--no-figures", "--verbose"])):
+        out = runs[name] = tmp_path / name
+        assert main(["simulate", "--duration", "3", "--settled",
+                     str(sim_dir / "settled_state.npz"), "--out", str(out), "--quiet",
+                     *extra]) == 0
+    assert not list(runs["without"].glob("*.png"))
+    assert {p.name for p in runs["with"].glob("*.png")} == {
+        "posture.png", "responses.png", "transmissibility_z.png"}
+    for name in ("timeseries.csv", "seat_forces.csv", "joint_torques.csv", "frf.csv",
+                 "apparent_mass.csv"):
+        assert (runs["with"] / name).read_bytes() == (runs["without"] / name).read_bytes()
+    summary = json.loads((runs["without"] / "summary.json").read_text())
+    assert "posture.png" not in summary["files"]
+    wall = summary["wall_s"]
+    assert set(wall) == {"settle", "vibrate", "write", "analysis", "total (after imports)"}
+    assert sum(v for k, v in wall.items() if k != "total (after imports)") \
+        <= wall["total (after imports)"]
+    printed = capsys.readouterr().out
+    assert "wall clock (s): settle" in printed
+    assert "us per time step (3000 steps of 1 ms)" in printed
+
+
 def test_comfort_and_transmissibility_commands(sim_dir, tmp_path):
     assert main(["comfort", str(sim_dir), "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "comfort.json").read_text())
