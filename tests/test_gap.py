@@ -397,3 +397,69 @@ def test_creeping_slip_lets_the_body_slide_below_its_rate():
     assert H1[0, 0] > 20 / k  # creeping: the mass slides
     assert H1[0, 1] == pytest.approx(1 / k, rel=0.01)  # the spring carries F
     assert H1[1, 0] == pytest.approx(H0[1, 0], rel=0.02)  # well above lam: unchanged
+
+
+def _sdof(f, fn, zeta=0.3):
+    """Base-excited single-DoF transmissibility with natural frequency fn."""
+    r = f / fn
+    return (1 + 2j * zeta * r) / (1 - r * r + 2j * zeta * r)
+
+
+def _level_rows(fn_data, fn_model, levels=(0.3, 0.6), rng=None):
+    """Vertical rows of pelvis, trunk and head at two levels with resonances
+    `fn_data` (per level; measured with 1% noise when `rng`) and the model's
+    prediction with `fn_model`."""
+    f = np.round(np.arange(0.1, 12.0 + 1e-9, 0.1), 6)
+    parts, Hm = [], []
+    for lv, fd, fm in zip(levels, fn_data, fn_model, strict=True):
+        for seg in ("pelvis", "trunk", "head"):
+            H = _sdof(f, fd)
+            if rng is not None:
+                noise = rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))
+                H = H * (1 + 0.01 * noise)
+            parts.append((seg, CHANNEL_NAMES.index(f"{seg}_z"), lv, H))
+            Hm.append(_sdof(f, fm))
+    n = len(f) * len(parts)
+    cat = lambda k: np.concatenate([np.broadcast_to(p[k], len(f)) for p in parts])  # noqa
+    freq = np.tile(f, len(parts))
+    coh = np.full(n, 0.95)
+    nav = np.full(n, 20.0)
+    rows = Rows(np.full(n, "z"), cat(0).astype(str), np.full(n, "z"), cat(1).astype(int), freq,
+                cat(2).astype(float), band_index(freq), cat(3), coh, nav,
+                relative_variance(coh, nav, 0.0))
+    return rows, np.concatenate(Hm)
+
+
+def test_peak_frequency_finds_a_resonance_between_bins():
+    from ehm_drake.gap.single.diagnose import peak_frequency
+
+    f = np.round(np.arange(0.1, 12.0 + 1e-9, 0.1), 6)
+    for fn in (4.03, 4.55, 5.71):
+        # The SDOF gain peaks a little below fn: find its true maximum finely.
+        fine = np.linspace(1, 12, 200001)
+        true = fine[np.argmax(np.abs(_sdof(fine, fn)))]
+        assert peak_frequency(f, _sdof(f, fn)) == pytest.approx(true, abs=0.02)
+    assert np.isnan(peak_frequency(np.array([0.5, 0.6]), np.array([1.0, 2.0])))
+
+
+def test_resonance_shift_compares_the_subjects_softening_with_the_models():
+    """A subject whose vertical resonance falls 5 -> 4 Hz from 0.3 to 0.6
+    m/s^2 (x0.8 per doubling) softens more than a model that falls
+    5 -> 4.6 Hz (x0.92), and less than one that falls 5 -> 3.5 Hz; equal
+    shifts read "as much as", with measurement noise."""
+    from ehm_drake.gap.single.diagnose import resonance_shift
+
+    rng = np.random.default_rng(4)
+    for fn_model, word in (((5.0, 4.6), "more than"), ((5.0, 3.5), "less than"),
+                           ((5.2, 4.16), "as much as")):
+        rows, Hm = _level_rows((5.0, 4.0), fn_model, rng=rng)
+        e = resonance_shift(rows, Hm)["z"]
+        assert e["levels"] == [0.3, 0.6]
+        assert e["data_per_doubling"] == pytest.approx(0.8, abs=0.015)
+        assert e["model_per_doubling"] == pytest.approx(fn_model[1] / fn_model[0], abs=0.015)
+        assert e["compared"] == word, (fn_model, e)
+    # Without the model's prediction: the data's shift alone; one level: nothing.
+    rows, _ = _level_rows((5.0, 4.0), (5.0, 4.0))
+    e = resonance_shift(rows)["z"]
+    assert "compared" not in e and "model" not in e["segments"]["pelvis"]
+    assert resonance_shift(rows.take(rows.level == 0.3)) == {}

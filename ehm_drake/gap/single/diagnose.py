@@ -78,6 +78,7 @@ from ...model.anthropometry import REFERENCE, BodyMeasures
 from ...parallel import run_jobs, worker_count
 from ...params import ModelParams, load_params
 from ...progress import Progress
+from ...systems.outputs import CHANNEL_NAMES
 from ..library.effects import EFFECT_NAMES, EFFECTS
 from ..library.family import build_families, linearize_cut, static_penetrations
 from ..library.models import (
@@ -409,6 +410,82 @@ def level_evidence(rows: Rows) -> dict:
     return out
 
 
+#: The resonance against level: the excited direction's own translation of
+#: these segments, peaks searched in this band (Hz; the seated body's
+#: whole-body resonances: 4-6 Hz vertical, 1.5-4 Hz fore-and-aft), the gain
+#: smoothed over this many frequency bins first.
+RESONANCE_SEGMENTS = ("pelvis", "trunk", "head")
+RESONANCE_BAND_HZ = (1.0, 12.0)
+RESONANCE_SMOOTHING_BINS = 5
+#: Per-doubling factors closer than this are reported "as much as" each
+#: other (the peak's resolution: a tenth of a bin width at 4-5 Hz, after
+#: smoothing and interpolation, is about 1%).
+RESONANCE_TOLERANCE = 0.02
+
+
+def peak_frequency(freq: np.ndarray, gain: np.ndarray,
+                   band=RESONANCE_BAND_HZ, bins: int = RESONANCE_SMOOTHING_BINS) -> float:
+    """The frequency of the largest gain in `band` (Hz), the gain smoothed
+    over `bins` bins and the peak placed by a parabola through its
+    neighbours; NaN without three bins in the band."""
+    order = np.argsort(freq)
+    f, g = freq[order], np.abs(gain[order])
+    m = (f >= band[0]) & (f <= band[1])
+    f, g = f[m], g[m]
+    if len(f) < 3:
+        return math.nan
+    w = np.ones(min(bins, len(g)))
+    g = np.convolve(g, w, "same") / np.convolve(np.ones_like(g), w, "same")
+    k = int(np.argmax(g))
+    if 0 < k < len(g) - 1:
+        a, b, c = g[k - 1], g[k], g[k + 1]
+        den = a - 2 * b + c
+        if den < 0:
+            return float(f[k] + 0.5 * (a - c) / den * (f[k + 1] - f[k - 1]) / 2)
+    return float(f[k])
+
+
+def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
+    """Per direction tested at two or more levels: the frequency of each
+    segment's resonance (`RESONANCE_SEGMENTS`, the direction's own
+    translation) at the lowest and the highest level, in the data and, given
+    `H_model` (a prediction of every row), in the model; the ratio high /
+    low and its factor per doubling of the level (people's vertical
+    resonance: about x0.87 per doubling from 0.25 to 2 m/s^2 r.m.s., Fairley
+    & Griffin 1989, doi:10.1016/0021-9290(89)90031-6)."""
+    out = {}
+    for d in "xyz":
+        levels = sorted({lv for dd, lv in rows.tests if dd == d and np.isfinite(lv)})
+        if len(levels) < 2:
+            continue
+        lo, hi = levels[0], levels[-1]
+        doublings = math.log2(hi / lo)
+        entry = {"levels": [lo, hi], "segments": {}}
+        sources = {"data": rows.H} | ({} if H_model is None else {"model": H_model})
+        for seg in RESONANCE_SEGMENTS:
+            ch = CHANNEL_NAMES.index(f"{seg}_{d}")
+            seg_entry = {}
+            for name, H in sources.items():
+                pk = []
+                for lv in (lo, hi):
+                    m = rows.test_mask(d, lv) & (rows.channel == ch)
+                    pk.append(peak_frequency(rows.freq[m], H[m]))
+                ratio = pk[1] / pk[0]
+                seg_entry[name] = {"peak_hz": pk, "ratio": ratio,
+                                   "per_doubling": ratio ** (1.0 / doublings)}
+            entry["segments"][seg] = seg_entry
+        for name in sources:
+            vals = [e[name]["per_doubling"] for e in entry["segments"].values()
+                    if np.isfinite(e[name]["per_doubling"])]
+            entry[f"{name}_per_doubling"] = float(np.median(vals)) if vals else math.nan
+        if H_model is not None:
+            diff = entry["data_per_doubling"] - entry["model_per_doubling"]
+            entry["compared"] = ("as much as" if not abs(diff) > RESONANCE_TOLERANCE
+                                 else "more than" if diff < 0 else "less than")
+        out[d] = entry
+    return out
+
+
 # ---------------------------------------------------------------------------
 # The diagnosis
 # ---------------------------------------------------------------------------
@@ -597,6 +674,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
                for n in names]
     ranking.sort(key=lambda r: (r["delta_bic"], -r["gap_reduction_heldout"]))
     evidence = level_evidence(rows)
+    resonance = resonance_shift(rows, _given_prediction(state, base["theta"][:nb]))
     d = decide(len(significant), ranking, len(rows), len(names), evidence)
     best, verdict = d["best"], d["verdict"]
     experiment = separating_experiment(best, d["close"][0], state) if d["close"] else None
@@ -623,7 +701,8 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
         "ambiguous_with": ambiguous_with,
         "separating_experiment": experiment,
         "explanation": explanation,
-        "evidence": {"level": evidence, "nonlinear": d["nonlinear_evidence"]},
+        "evidence": {"level": evidence, "nonlinear": d["nonlinear_evidence"],
+                     "resonance": resonance},
         "base_refit": {n: float(math.exp(b)) for n, b in
                        zip(base_names, results["none"]["theta"][:nb], strict=True)},
         "data": {"source": lab.source, "rows": len(rows),
@@ -640,10 +719,12 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     return report, cells_before, cells_after
 
 
-def _given_prediction(state) -> np.ndarray:
+def _given_prediction(state, theta=None) -> np.ndarray:
+    """The base model's prediction of every row: as given, or at the base
+    log-scales `theta` (the base refit's)."""
     fam = state["families"]["base"]
     pred = Predictor(fam, Candidate(()), state["rows"], state["tests"], state["base_names"],
                      Statics(fam.family.info, state["slope"]))
-    theta = np.zeros(len(state["base_names"]))
+    theta = np.zeros(len(state["base_names"])) if theta is None else np.asarray(theta, float)
     pred.update_statistics(theta)
     return pred.predict(theta)
