@@ -17,8 +17,10 @@ from blind runs made without a reference group, e.g.
 
 and prints, per reality, the subjects named under the shipped rule (with a
 Clopper-Pearson 95% upper bound of the rate), the statistic's quantiles,
-and the smallest threshold under which at most `alpha` of the subjects are
-named.  `--out` writes the per-subject values.
+the smallest threshold under which at most `alpha` of the subjects are
+named, and per direction the band of the reports' resonance shift against
+the model (data - model factor per doubling of the level) that holds all
+but `alpha` of the subjects.  `--out` writes the per-subject values.
 """
 
 from __future__ import annotations
@@ -33,13 +35,20 @@ from scipy.stats import beta
 
 def subject_statistic(report: dict) -> dict:
     """One no-effect subject's single-subject report -> its verdict, the
-    effect named (or None), the ordinary pass's best held-out reduction and
+    effect named (or None), the ordinary pass's best held-out reduction,
     the structural statistic (largest reduction beyond the discrepancy
-    among candidates with delta BIC < 0)."""
+    among candidates with delta BIC < 0) and, per direction tested at two
+    levels, how much more the data's resonance moves per doubling of the
+    level than the refitted model's (data - model factor; negative: the
+    subject softens more)."""
     st = report.get("structural") or {}
     beyond = [e["reduction_beyond"] for e in st.get("ranking", []) if e["delta_bic"] < 0]
     ranking = report.get("ranking") or []
+    resonance = (report.get("evidence") or {}).get("resonance") or {}
     return {"verdict": report["verdict"], "named": report.get("best_effect"),
+            "resonance_difference": {d: e["data_per_doubling"] - e["model_per_doubling"]
+                                     for d, e in resonance.items()
+                                     if "model_per_doubling" in e},
             "ordinary_best_reduction": ranking[0]["gap_reduction_heldout"] if ranking else None,
             "structural_ran": bool(st.get("ran")),
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
@@ -88,6 +97,24 @@ def threshold_for(statistics, alpha: float) -> float:
     return float(s[allowed]) + 1e-9 if allowed < len(s) else 0.0
 
 
+def resonance_band(subjects: list, alpha: float) -> dict:
+    """Per direction: the no-effect subjects' resonance differences (data -
+    model factor per doubling), their median, and the band holding all but
+    alpha of them (alpha / 2 cut from each side, nearest order statistics):
+    a rule naming softening below it, or stiffening above, names at most
+    alpha of such subjects."""
+    out = {}
+    for d in "xyz":
+        v = np.sort([s["resonance_difference"][d] for s in subjects
+                     if d in s.get("resonance_difference", {})])
+        if not len(v):
+            continue
+        cut = int(np.floor(alpha / 2 * len(v)))
+        out[d] = {"subjects": len(v), "median": float(np.median(v)),
+                  "band_at_alpha": [float(v[cut]), float(v[len(v) - 1 - cut])]}
+    return out
+
+
 def summary(subjects: list, alpha: float) -> dict:
     n = len(subjects)
     named = [s for s in subjects if s["named"]]
@@ -97,7 +124,8 @@ def summary(subjects: list, alpha: float) -> dict:
             "rate": len(named) / n, "rate_upper_95": upper_bound(len(named), n),
             "structural_ran": sum(s["structural_ran"] for s in subjects),
             "statistic_quantiles": {q: float(np.quantile(stat, q)) for q in (0.5, 0.9, 1.0)},
-            "threshold_at_alpha": threshold_for(stat, alpha)}
+            "threshold_at_alpha": threshold_for(stat, alpha),
+            "resonance": resonance_band(subjects, alpha)}
 
 
 def main(argv=None) -> None:
@@ -120,6 +148,11 @@ def main(argv=None) -> None:
               f"{s['structural_ran']}; statistic median {q[0.5]:.3f}, 90% {q[0.9]:.3f}, "
               f"max {q[1.0]:.3f}; threshold for <= {100 * a.alpha:.0f}%: "
               f"{s['threshold_at_alpha']:.3f}")
+        for d, r in s["resonance"].items():
+            lo, hi = r["band_at_alpha"]
+            print(f"  {d}: resonance factor per doubling, data - model, over {r['subjects']} "
+                  f"subjects: median {r['median']:+.3f}, {100 * (1 - a.alpha):.0f}% of them "
+                  f"in [{lo:+.3f}, {hi:+.3f}]")
     if a.out:
         Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
 

@@ -207,10 +207,12 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
         named = b >= EXPLAINED_BEYOND
         ranking = [{"effect": "arms", "delta_bic": -5.0, "reduction_beyond": b},
                    {"effect": "softening", "delta_bic": 40.0, "reduction_beyond": 0.9}]
+        resonance = {"z": {"data_per_doubling": 0.85 + 0.01 * i, "model_per_doubling": 0.9}}
         (t / "diagnosis" / "report.json").write_text(json.dumps({
             "verdict": "explained" if named else "structural",
             "best_effect": "arms" if named else None, "ranking": [],
-            "structural": {"ran": True, "ranking": ranking}}))
+            "structural": {"ran": True, "ranking": ranking},
+            "evidence": {"resonance": resonance}}))
     # A trial with a hidden effect is not a null subject.
     t = run / "trial_999"
     (t / "diagnosis").mkdir(parents=True)
@@ -224,3 +226,10 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     assert 0.19 < s["threshold_at_alpha"] < 0.20
     assert sum(x >= s["threshold_at_alpha"] for x in beyond) == 1
     assert 0.5 < s["rate_upper_95"] < 0.6  # Clopper-Pearson, 2 of 10
+    # Resonance shifts data - model: -0.05 ... +0.04; 90% of ten: cut none
+    # (floor(0.05 * 10) = 0) on either side, so the band is the full range.
+    r = s["resonance"]["z"]
+    assert r["subjects"] == 10 and r["median"] == pytest.approx(-0.005)
+    assert r["band_at_alpha"] == pytest.approx([-0.05, 0.04])
+    assert bench.resonance_band(data["lumped"], alpha=0.4)["z"]["band_at_alpha"] == \
+        pytest.approx([-0.03, 0.02])
