@@ -99,7 +99,8 @@ def _load_model_params(args):
 
 def cmd_simulate(args) -> int:
     from .analysis.figures import plot_cases
-    from .plots import plot_responses
+    from .diagram import build_diagram
+    from .plots import plot_posture, plot_responses
     from .signals import make_seat_signal
     from .simulation import SettledState, settle, vibrate
 
@@ -129,7 +130,8 @@ def cmd_simulate(args) -> int:
     t = time.perf_counter()
     files = [p.name for p in result.write_csv(out)]
     wall["write"] = time.perf_counter() - t
-    summary = _simulate_summary(args, params, measures, signal, settled, result)
+    model = build_diagram(params, measures, None, args.variant, guard=False)
+    summary = _simulate_summary(args, params, measures, signal, settled, result, model)
     frf = None
     if signal.kind != "csv" or signal.meta.get("direction"):
         t = time.perf_counter()
@@ -137,8 +139,11 @@ def cmd_simulate(args) -> int:
         wall["analysis"] = time.perf_counter() - t
     if figures:
         t = time.perf_counter()
-        files.append(posture_figure(params, measures, args.variant, settled.positions,
-                                    out / "posture.png").name)
+        ref = model.plant.GetPositions(model.plant.CreateDefaultContext())
+        files.append(plot_posture(
+            model, {f"settled ({args.variant})": settled.positions,
+                    "initial (reference)": ref},
+            out / "posture.png", f"Posture after settling, variant {args.variant}").name)
         files.append(plot_responses(result, out / "responses.png").name)
         if frf is not None:
             files += [p.name for p in plot_cases({args.variant: frf}, out)]
@@ -155,18 +160,6 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-def posture_figure(params, measures, variant, settled_positions, path) -> Path:
-    """posture.png of `simulate`: the settled posture on the initial one."""
-    from .diagram import build_diagram
-    from .plots import plot_posture
-
-    model = build_diagram(params, measures, None, variant, guard=False)
-    ref = model.plant.GetPositions(model.plant.CreateDefaultContext())
-    return plot_posture(model, {f"settled ({variant})": settled_positions,
-                                "initial (reference)": ref},
-                        path, f"Posture after settling, variant {variant}")
-
-
 def _print_wall(wall: dict, result, time_step: float) -> None:
     """--verbose: where the command's time went (wall clock, s), and the
     run's cost per time step."""
@@ -178,11 +171,8 @@ def _print_wall(wall: dict, result, time_step: float) -> None:
               f"{result.meta['real_time_factor']:.2f}")
 
 
-def _simulate_summary(args, params, measures, signal, settled, result) -> dict:
-    from .diagram import build_diagram
-
+def _simulate_summary(args, params, measures, signal, settled, result, model) -> dict:
     s = params.simulation
-    model = build_diagram(params, measures, None, args.variant, guard=False)
     return {
         "dof": int(model.plant.num_velocities()),
         "segments": len(model.hp.body.segments),

@@ -190,4 +190,3 @@ def plot_responses(result, path: str | Path, segments=("pelvis", "trunk", "head"
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
-
