@@ -463,3 +463,7 @@ def test_resonance_shift_compares_the_subjects_softening_with_the_models():
     e = resonance_shift(rows)["z"]
     assert "compared" not in e and "model" not in e["segments"]["pelvis"]
     assert resonance_shift(rows.take(rows.level == 0.3)) == {}
+    # A segment not measured is left out (no NaN in the report).
+    e = resonance_shift(rows.take(rows.segment != "head"))["z"]
+    assert set(e["segments"]) == {"pelvis", "trunk"}
+    assert e["data_per_doubling"] == pytest.approx(0.8, abs=0.005)

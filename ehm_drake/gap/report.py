@@ -372,6 +372,9 @@ def _resonance_lines(resonance: dict) -> list[str]:
     """The report's "Resonance against level" section: each direction's
     resonance frequency at its two levels, in the data and the refitted
     model, and the factor per doubling of the level."""
+    def moves(factor):
+        return "rises" if factor > 1 else "falls"
+
     lines = ["## Resonance against level (the data and the refitted model)", "",
              "| direction | segment | data (Hz) | per doubling | model (Hz) | per doubling |",
              "|---|---|---|---|---|---|"]
@@ -386,9 +389,6 @@ def _resonance_lines(resonance: dict) -> list[str]:
                     cells += ["", ""]
             lines.append(f"| {d} | {seg} | " + " | ".join(cells) + " |")
     lines.append("")
-    def moves(factor):
-        return "rises" if factor > 1 else "falls"
-
     for d, e in resonance.items():
         if "compared" in e:
             fd, fm = e["data_per_doubling"], e["model_per_doubling"]

@@ -418,8 +418,9 @@ RESONANCE_SEGMENTS = ("pelvis", "trunk", "head")
 RESONANCE_BAND_HZ = (1.0, 12.0)
 RESONANCE_SMOOTHING_BINS = 5
 #: Per-doubling factors closer than this are reported "as much as" each
-#: other (the peak's resolution: a tenth of a bin width at 4-5 Hz, after
-#: smoothing and interpolation, is about 1%).
+#: other: about three standard deviations of the factor's scatter from
+#: measurement noise (0.007 on records with 1% noise per bin and damping
+#: 0.3, `tests/test_gap.py`).
 RESONANCE_TOLERANCE = 0.02
 
 
@@ -447,7 +448,7 @@ def peak_frequency(freq: np.ndarray, gain: np.ndarray,
 
 def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
     """Per direction tested at two or more levels: the frequency of each
-    segment's resonance (`RESONANCE_SEGMENTS`, the direction's own
+    measured segment's resonance (`RESONANCE_SEGMENTS`, the direction's own
     translation) at the lowest and the highest level, in the data and, given
     `H_model` (a prediction of every row), in the model; the ratio high /
     low and its factor per doubling of the level (people's vertical
@@ -473,11 +474,13 @@ def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
                 ratio = pk[1] / pk[0]
                 seg_entry[name] = {"peak_hz": pk, "ratio": ratio,
                                    "per_doubling": ratio ** (1.0 / doublings)}
-            entry["segments"][seg] = seg_entry
+            if np.isfinite(seg_entry["data"]["per_doubling"]):  # (a channel not measured)
+                entry["segments"][seg] = seg_entry
+        if not entry["segments"]:
+            continue
         for name in sources:
-            vals = [e[name]["per_doubling"] for e in entry["segments"].values()
-                    if np.isfinite(e[name]["per_doubling"])]
-            entry[f"{name}_per_doubling"] = float(np.median(vals)) if vals else math.nan
+            entry[f"{name}_per_doubling"] = float(np.median(
+                [e[name]["per_doubling"] for e in entry["segments"].values()]))
         if H_model is not None:
             diff = entry["data_per_doubling"] - entry["model_per_doubling"]
             entry["compared"] = ("as much as" if not abs(diff) > RESONANCE_TOLERANCE
