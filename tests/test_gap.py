@@ -431,7 +431,7 @@ def _level_rows(fn_data, fn_model, levels=(0.3, 0.6), rng=None):
 
 
 def test_peak_frequency_finds_a_resonance_between_bins():
-    from ehm_drake.gap.single.diagnose import peak_frequency
+    from ehm_drake.gap.single.resonance import peak_frequency
 
     f = np.round(np.arange(0.1, 12.0 + 1e-9, 0.1), 6)
     for fn in (4.03, 4.55, 5.71):
@@ -447,7 +447,7 @@ def test_resonance_shift_compares_the_subjects_softening_with_the_models():
     m/s^2 (x0.8 per doubling) softens more than a model that falls
     5 -> 4.6 Hz (x0.92), and less than one that falls 5 -> 3.5 Hz; equal
     shifts read "as much as", with measurement noise."""
-    from ehm_drake.gap.single.diagnose import resonance_shift
+    from ehm_drake.gap.single.resonance import resonance_shift
 
     rng = np.random.default_rng(4)
     for fn_model, word in (((5.0, 4.6), "more than"), ((5.0, 3.5), "less than"),
