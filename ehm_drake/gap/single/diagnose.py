@@ -598,7 +598,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
                for n in names]
     ranking.sort(key=lambda r: (r["delta_bic"], -r["gap_reduction_heldout"]))
     evidence = level_evidence(rows)
-    resonance = resonance_shift(rows, _given_prediction(state, base["theta"][:nb]))
+    resonance = resonance_shift(rows, base["H_all"])
     d = decide(len(significant), ranking, len(rows), len(names), evidence)
     best, verdict = d["best"], d["verdict"]
     experiment = separating_experiment(best, d["close"][0], state) if d["close"] else None
@@ -643,12 +643,10 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     return report, cells_before, cells_after
 
 
-def _given_prediction(state, theta=None) -> np.ndarray:
-    """The base model's prediction of every row: as given, or at the base
-    log-scales `theta` (the base refit's)."""
+def _given_prediction(state) -> np.ndarray:
     fam = state["families"]["base"]
     pred = Predictor(fam, Candidate(()), state["rows"], state["tests"], state["base_names"],
                      Statics(fam.family.info, state["slope"]))
-    theta = np.zeros(len(state["base_names"])) if theta is None else np.asarray(theta, float)
+    theta = np.zeros(len(state["base_names"]))
     pred.update_statistics(theta)
     return pred.predict(theta)
