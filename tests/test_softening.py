@@ -8,10 +8,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ehm_drake import jit
 from ehm_drake.analysis.equivalent import SeatSpectrum, equivalent_linear
 from ehm_drake.analysis.linear import default_frequencies, linearize
 from ehm_drake.diagram import build_diagram
+from ehm_drake.model import softening as softening_law
 from ehm_drake.model.softening import (
+    ElementSet,
+    element_spring,
     equivalent_loss,
     loss_fraction,
     tissue_movement,
@@ -100,6 +104,48 @@ def test_nothing_at_rest(default_at_rest):
     rel = np.abs(T1 - T2) / np.max(np.abs(T2))
     assert np.max(rel) < 0.05
     assert _am_peak(soft_lin) == pytest.approx(_am_peak(plain), rel=0.03)
+
+
+def test_the_compiled_spring_is_the_law(monkeypatch):
+    # Tissue on a compliant seat, on a rigid one (no series compliance) and
+    # muscles, over five decades of movement: the compiled kernel (numba)
+    # gives the NumPy law's numbers, and the law stands alone without it.
+    el = ElementSet(("tissue", "tissue", "muscle"), ("a", "b", "c"),
+                    np.array([60000.0, 250000.0, 400.0]), np.array([250000.0, 250000.0, 400.0]),
+                    np.array([0.8, 0.8, 0.7]), np.array([7e-5, 7e-5, 0.0087]),
+                    np.array([2.0, 2.0, 1.0]))
+    s = 10.0 ** np.random.default_rng(3).uniform(-7, -1, (50, 3))
+    compiled = np.array([element_spring(el, row) for row in s])
+    monkeypatch.setattr(softening_law, "_spring_kernel", None)
+    law = np.array([element_spring(el, row) for row in s])
+    assert np.allclose(compiled, law, rtol=1e-12, atol=0.0)
+    assert np.all(law[:, :2] >= 0) and np.all(law[:, 2] <= 0)
+    # (CI installs numba: the comparison above compared two paths.)
+    assert jit.available()
+
+
+def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
+    # The tissue points' normal displacements and Jacobian rows taken from
+    # what the force laws computed at the state are the ones the softening
+    # computes itself, bit for bit, at a moved state.
+    model, ctx = default_at_rest
+    ctx = ctx.Clone()
+    plant = model.plant
+    pc = plant.GetMyMutableContextFromRoot(ctx)
+    x = plant.GetPositionsAndVelocities(pc)
+    x += 1e-3 * np.random.default_rng(4).standard_normal(x.size)
+    plant.SetPositionsAndVelocities(pc, x)
+    laws = model.systems["force_laws"]
+    laws.GetOutputPort("generalized_force").Eval(laws.GetMyContextFromRoot(ctx))
+    soft = model.systems["body_softening"]
+    sctx = soft.GetMyContextFromRoot(ctx)
+    soft._scratch.set_state(x)
+    assert soft._scratch.shared("restraint normals") is not None
+    d_shared, J_shared, _ = soft._calc_deformation_kin(sctx)
+    soft._scratch.share("restraint normals", None)
+    d_own, J_own, _ = soft._calc_deformation_kin(sctx)
+    assert np.array_equal(d_shared, d_own) and np.array_equal(J_shared, J_own)
+    assert np.any(J_own != 0)
 
 
 def test_the_default_diagram_sums_the_laws_and_the_softening():

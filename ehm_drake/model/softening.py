@@ -73,6 +73,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..jit import kernel
 from .joint_layout import pid_vectors
 
 #: The contact pairs whose tissue softens: under the ischial tuberosities and
@@ -120,6 +121,15 @@ class ElementSet:
     def series_compliance(self) -> np.ndarray:
         """1/k_s of the seat under each element (0: rigid, and for muscles)."""
         return self._constants[0]
+
+    @cached_property
+    def _kernel_arguments(self):
+        """The element arrays `_element_spring_kernel` takes after `s`."""
+        c, k_long, tissue = self._constants
+        return (np.ascontiguousarray(self.k_rest, float),
+                np.ascontiguousarray(self.k_tissue, float), c, k_long,
+                np.ascontiguousarray(self.critical, float),
+                np.ascontiguousarray(self.max_loss, float), tissue, SERIES_ITERATIONS)
 
     @cached_property
     def _constants(self):
@@ -209,10 +219,38 @@ def element_spring(elements: ElementSet, s):
     """The stiffness each element applies about its running mean at RMS
     movement `s` (N/m or N m/rad): for tissue its short-range part on the
     contact's long-range stiffness, k_p(s) - k_p(inf) (>= 0); for muscles
-    minus the loss (<= 0)."""
+    minus the loss (<= 0).  Every time step: compiled
+    (`_element_spring_kernel`) for a float vector of the elements."""
+    if (_spring_kernel is not None and type(s) is np.ndarray and s.dtype == np.float64
+            and s.shape == (elements.n,)):
+        return _spring_kernel(s, *elements._kernel_arguments)
     loss = equivalent_loss(elements, s)
     _, k_long, tissue = elements._constants
     return np.where(tissue, elements.k_rest - k_long - loss, -loss)
+
+
+def _element_spring_kernel(s, k_rest, k_tissue, compliance, k_long, critical, max_loss,
+                           tissue, iterations):
+    """`element_spring` element by element: `tissue_movement`,
+    `equivalent_loss` and its last step with the same operations in the
+    same order (compiled by `ehm_drake.jit`; the same numbers to rounding,
+    tests/test_softening.py)."""
+    out = np.empty(s.shape[0])
+    for i in range(s.shape[0]):
+        s_d = s[i]
+        s_t = s_d
+        for _ in range(iterations):
+            x = s_t / critical[i]
+            k_t = k_tissue[i] * (1.0 - max_loss[i] * x / (1.0 + x))
+            s_t = s_d / (1.0 + k_t * compliance[i])
+        x = s_t / critical[i]
+        k_t = k_tissue[i] * (1.0 - max_loss[i] * x / (1.0 + x))
+        loss = k_rest[i] - 1.0 / (1.0 / k_t + compliance[i])
+        out[i] = k_rest[i] - k_long[i] - loss if tissue[i] else -loss
+    return out
+
+
+_spring_kernel = kernel(_element_spring_kernel)
 
 
 def long_range_contacts(params):

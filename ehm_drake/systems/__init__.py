@@ -60,7 +60,8 @@ def define_system(name: str, module: str):
 
 _converted_plants: dict = {}
 #: (plant id, float) -> (plant, its shared scratch context, [the bytes of the
-#: state it holds]), the most recently built plants only (the systems keep their
+#: state it holds, what the systems computed there and share]), the most
+#: recently built plants only (the systems keep their
 #: context; the plant is kept so that its id is not reused meanwhile).
 _shared_contexts: OrderedDict = OrderedDict()
 _SHARED_CONTEXTS_KEPT = 8
@@ -80,7 +81,7 @@ class PlantScratch:
         if T is float:
             self.plant = plant
             if key not in _shared_contexts:
-                _shared_contexts[key] = (plant, plant.CreateDefaultContext(), [None])
+                _shared_contexts[key] = (plant, plant.CreateDefaultContext(), [None, {}])
                 while len(_shared_contexts) > _SHARED_CONTEXTS_KEPT:
                     _shared_contexts.popitem(last=False)
             _shared_contexts.move_to_end(key)
@@ -101,4 +102,17 @@ class PlantScratch:
         if key != self._held[0]:
             self.plant.SetPositionsAndVelocities(self.context, x)
             self._held[0] = key
+            self._held[1].clear()
         return self.context
+
+    def share(self, name: str, value) -> None:
+        """Leave `value` for the other systems of this plant, valid while
+        the scratch context holds the state of the last `set_state` (float
+        only; AutoDiffXd contexts are not shared)."""
+        if self._held is not None:
+            self._held[1][name] = value
+
+    def shared(self, name: str):
+        """What a system of this plant left under `name` (`share`) at the
+        state of the last `set_state`, or None: call `set_state` first."""
+        return None if self._held is None else self._held[1].get(name)

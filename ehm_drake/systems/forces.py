@@ -52,6 +52,12 @@ from .seat import (
     slip_update,
 )
 
+#: What `ForceLaws` shares on the plant's scratch context at each state
+#: (`PlantScratch.share`): ({point name: (index, first row in J)}, normal
+#: displacement per point (point order, m), J (its first 3n rows the points'
+#: translational Jacobian, body by body)).
+RESTRAINT_NORMALS = "restraint normals"
+
 #: The former force systems, in the order their parts are reported.
 LAWS = ("passive_joints", "joint_pid", "head_in_space", "shear_restraints",
         "seat_inertial_load")
@@ -294,6 +300,9 @@ def ForceLaws_(T):
             check_restraint_parameters(r_params, len(points))
             self._points = list(points)
             self._geometry = g = RestraintGeometry(p, points)
+            # Per point name: its index (point order) and its three rows in J.
+            self._point_rows = {pt.name: (i, 3 * int(g.grouped_row[i]))
+                                for i, pt in enumerate(points)}
             self._constraints = constraints
             self._contact_damping = (None if contact_damping is None
                                      or not np.any(contact_damping)
@@ -503,6 +512,10 @@ def ForceLaws_(T):
             PV = self._M @ P.ravel(order="F") - self._m0
             VV = self._M @ V[:n3]
             s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:n3]
+            # The points' normal displacements and Jacobian at this state for
+            # the body's softening (`BodySoftening`), which would compute them
+            # again.
+            self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, pos_n, J))
             slip = self._discrete(context, self._slip)
             face = self._geometry.face
             fmax = restraint_limits(c.restraint, face, pos_n)

@@ -44,6 +44,7 @@ from pydrake.systems.framework import (
 from ..model.joint_layout import JointLayout
 from ..model.softening import ElementSet, element_spring, equivalent_loss, stationary_rms
 from . import PlantScratch, define_system
+from .forces import RESTRAINT_NORMALS
 from .joints import _BallIndex, cardan_to_generalized
 from .seat import SEAT_PART_NAMES, RestraintGeometry, in_contact
 
@@ -73,6 +74,7 @@ def BodySoftening_(T):
             self._ball = _BallIndex(layout)
             self._alpha = float(period) / elements.time_constant
             self._last_spring = (None, None)
+            self._shared_rows = (None, None, None)
             n = elements.n
             self._state_port = self.DeclareVectorInputPort("state", self._nq + self._nv)
             self._param = self.DeclareNumericParameter(
@@ -161,12 +163,40 @@ def BodySoftening_(T):
             if self._geometry is not None:
                 g = self._geometry
                 ctx = self._scratch.set_state(x)
-                pos_n, Jn = g.normal_kinematics(self._scratch.plant, ctx)
+                shared = self._scratch.shared(RESTRAINT_NORMALS)
+                rows = None if shared is None else self._rows_in(shared[0])
+                if rows is not None:  # the restraints' at this state (same bits)
+                    index, j_rows, sign = rows
+                    pos_n, Jn = shared[1][index], sign * shared[2][j_rows]
+                else:
+                    pos_n, Jn = g.normal_kinematics(self._scratch.plant, ctx)
                 parts.append(pos_n)
                 touching = in_contact(g.face, pos_n)
             if len(self._muscle):
                 parts.append(x[self._layout.rot_q][self._muscle])
             return np.concatenate(parts), Jn, touching
+
+        def _rows_in(self, point_rows: dict):
+            """Where the tissue points' normal displacements and Jacobian
+            rows lie in what `ForceLaws` shares (`RESTRAINT_NORMALS`, whose
+            `point_rows` maps its points): (indices, Jacobian rows, normal
+            signs (n x 1)), or None when it lacks one of them.  Each normal
+            is a coordinate axis, so the rows are those of the normal
+            projection exactly."""
+            key = id(point_rows)
+            if self._shared_rows[0] != key:
+                found = None
+                if all(pt.name in point_rows for pt in self._args[3]):
+                    normal = np.array([pt.normal for pt in self._args[3]], float)
+                    axis = np.argmax(np.abs(normal), axis=1)
+                    if np.array_equal(np.abs(normal), np.eye(3)[axis]):
+                        at = [point_rows[pt.name] for pt in self._args[3]]
+                        found = (np.array([i for i, _ in at]),
+                                 np.array([r for _, r in at]) + axis,
+                                 normal[np.arange(len(axis)), axis][:, None])
+                # (the dict is kept alive with its key: ids are not reused)
+                self._shared_rows = (key, found, point_rows)
+            return self._shared_rows[1]
 
         def _rms(self, context):
             """(RMS movement per element, running means, active, force

@@ -116,10 +116,26 @@ def versions() -> dict[str, str]:
     return {p: version(p) for p in ("drake", "numpy", "scipy")}
 
 
+def avx512_targets() -> list[str]:
+    """NumPy's runtime-dispatched AVX-512 targets (e.g. ``X86_V4``,
+    ``AVX512_SKX``), which the cases run without: NumPy's AVX-512 kernels
+    of some functions round differently from its AVX2 ones, so the same
+    versions wrote other bytes for every frequency response (FRF CSVs, the
+    diagnosis report) on an AVX-512 machine (an AMD EPYC) than on the one
+    that stored them, while every time series matched; without them both
+    write the stored bytes (`NPY_DISABLE_CPU_FEATURES`)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__
+    except ImportError:  # NumPy 1.x
+        from numpy.core._multiarray_umath import __cpu_dispatch__
+    return [t for t in __cpu_dispatch__ if t == "X86_V4" or t.startswith("AVX512")]
+
+
 def run_cases(root: Path) -> None:
     root.mkdir(parents=True, exist_ok=True)
     (root / "sweep_spec.json").write_text(json.dumps(SWEEP_SPEC))
-    env = dict(os.environ, EHM_DRAKE_CACHE=str(root / "cache"))
+    env = dict(os.environ, EHM_DRAKE_CACHE=str(root / "cache"),
+               NPY_DISABLE_CPU_FEATURES=" ".join(avx512_targets()))
     for name, argv, _ in CASES:
         r = subprocess.run([sys.executable, "-m", "ehm_drake.cli", *argv], cwd=root, env=env,
                            capture_output=True, text=True)
