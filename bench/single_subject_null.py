@@ -13,14 +13,18 @@ from blind runs made without a reference group, e.g.
 
     ehm-drake blind --reality lumped --trials 30 --p-none 1 --p-two 0 --seed S \\
         --directions x,z --levels 0.3,0.6 --duration 120 --out RUN
-    python bench/single_subject_null.py RUN [RUN ...] [--alpha 0.1] [--out null.json]
+    python bench/single_subject_null.py RUN|VALUES.json [...] [--alpha 0.1] [--out null.json]
 
 and prints, per reality, the subjects named under the shipped rule (with a
 Clopper-Pearson 95% upper bound of the rate), the statistic's quantiles,
 the smallest threshold under which at most `alpha` of the subjects are
 named, and per direction the band of the reports' resonance shift against
 the model (data - model factor per doubling of the level) that holds all
-but `alpha` of the subjects.  `--out` writes the per-subject values.
+but `alpha` of the subjects.  `--out` writes the per-subject values; such
+a file given in place of a run adds its subjects (a subject met twice, the
+same reality, blind seed and trial, counts once), so a calibration can grow
+over several sessions (docs/history/data/single_subject_null.json holds the
+subjects diagnosed so far).
 """
 
 from __future__ import annotations
@@ -69,6 +73,7 @@ def collect(runs) -> dict:
             raise SystemExit(f"{run}: diagnosed against a reference group; this script "
                              "studies the single-subject rule")
         reality = settings.get("reality", "ehm")
+        seed = settings.get("seed")
         found = 0
         for rf in sorted(run.glob("trial_*/result.json")):
             r = json.loads(rf.read_text())
@@ -77,11 +82,35 @@ def collect(runs) -> dict:
                 continue
             s = subject_statistic(json.loads(rep_path.read_text()))
             s["trial"] = rf.parent.name
+            s["seed"] = seed
             out.setdefault(reality, []).append(s)
             found += 1
         if not found:
             raise SystemExit(f"{run}: no diagnosed no-effect trial")
     return out
+
+
+def gather(sources) -> dict:
+    """{reality: [subject statistics]} from blind run folders (`collect`)
+    and files of per-subject values written by `--out`; a subject found
+    twice (same reality, seed and trial) counts once."""
+    merged: dict[str, dict] = {}
+    for src in map(Path, sources):
+        if src.is_file():
+            try:
+                data = json.loads(src.read_text())
+            except json.JSONDecodeError as e:
+                raise SystemExit(f"{src}: not a file of subject values ({e})") from None
+            if not isinstance(data, dict) or not all(isinstance(v, list)
+                                                     for v in data.values()):
+                raise SystemExit(f"{src}: not a file of subject values "
+                                 "({reality: [subjects]}, as --out writes)")
+        else:
+            data = collect([src])
+        for reality, subjects in data.items():
+            for s in subjects:
+                merged.setdefault(reality, {})[(s.get("seed"), s["trial"])] = s
+    return {r: list(v.values()) for r, v in merged.items()}
 
 
 def upper_bound(k: int, n: int, confidence: float = 0.95) -> float:
@@ -136,7 +165,7 @@ def main(argv=None) -> None:
     ap.add_argument("--alpha", type=float, default=0.10)
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
-    data = collect(a.runs)
+    data = gather(a.runs)
     print(f"structural threshold shipped: {EXPLAINED_BEYOND:.2f} of the gap beyond the "
           "discrepancy")
     for reality, subjects in sorted(data.items()):

@@ -219,6 +219,14 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     (t / "result.json").write_text(json.dumps({"trial": 999, "hidden": {"arms": 1.0}}))
     (t / "diagnosis" / "report.json").write_text("{}")
     data = bench.collect([run])
+    # The values written by --out count with a run: a subject met twice once.
+    (tmp_path / "earlier.json").write_text(json.dumps(
+        {"lumped": data["lumped"][:3] + [dict(data["lumped"][0], trial="trial_500")]}))
+    merged = bench.gather([tmp_path / "earlier.json", run])
+    assert len(merged["lumped"]) == 11
+    (tmp_path / "bad.json").write_text("[1, 2]")
+    with pytest.raises(SystemExit, match="bad.json: not a file of subject values"):
+        bench.gather([tmp_path / "bad.json"])
     s = bench.summary(data["lumped"], alpha=0.10)
     assert s["subjects"] == 10 and s["named"] == 2 and s["named_effects"] == ["arms"]
     assert s["statistic_quantiles"][1.0] == 0.30  # softening's 0.9 has a positive delta BIC
