@@ -5,7 +5,11 @@ RMS per axis, random 0.1-12 Hz), outputs logged at 200 Hz, one core.
         [--design reference|implicit] [--output-every K]
 
 Prints the settle time (static equilibrium + 5 s settling), the real-time
-factor of the vibration run (simulated seconds per wall second) and two
+factor of the vibration run (simulated seconds per wall second), where a
+step's time goes (`step_split`: a second run, up to 20 s, with the Python
+parts timed: force laws, softening, the logged seat forces, the divergence
+guard, the plant's contact solve where the logging triggers it, the rest)
+and two
 ceilings set by the plant's own discrete step (SAP contact solve, no Python
 systems, no logging): the plant sitting in its settled state with the
 controllers' torques frozen at their settled values, and the plant
@@ -32,6 +36,92 @@ from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import ParameterError, load_params, validate
 from ehm_drake.signals import make_seat_signal
 from ehm_drake.simulation import StateMap, set_normal_reference, settle, vibrate
+
+#: The Python parts of a step, by class: the methods that Drake calls (ports,
+#: cache entries, events) whose time `step_split` books to each part.
+PARTS = {
+    "force laws": ("ehm_drake.systems.forces", "ForceLaws",
+                   ("_calc_constants", "_calc_step", "_calc_displacements", "_update",
+                    "_out_force", "_out_pid_torque", "_out_his_torque", "_out_seat_forces",
+                    "_out_point_forces", "_out_normal", "_out_deflection")),
+    "softening": ("ehm_drake.systems.softening", "BodySoftening",
+                  ("_calc_deformation_kin", "_calc_spring", "_calc_force", "_calc_seat_forces",
+                   "_calc_deformation", "_calc_rms", "_calc_loss", "_update")),
+    "seat forces (logged)": ("ehm_drake.systems.outputs", "SeatForces", ("_calc",)),
+    "divergence guard": ("ehm_drake.systems.outputs", "DivergenceGuard", ("_check",)),
+}
+
+
+class _Clock:
+    """Exclusive wall time per part: a part's time less that of the parts
+    called inside it (the plant's step runs inside whichever port first
+    asks for it)."""
+
+    def __init__(self):
+        self.total = {}
+        self._stack = []
+
+    def timed(self, part: str, fn):
+        import functools
+
+        @functools.wraps(fn)
+        def call(*args, **kwargs):
+            self._stack.append(0)
+            t0 = time.perf_counter_ns()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                dt = time.perf_counter_ns() - t0
+                inner = self._stack.pop()
+                self.total[part] = self.total.get(part, 0) + dt - inner
+                if self._stack:
+                    self._stack[-1] += dt
+        return call
+
+
+def step_split(params, settled, signal) -> dict:
+    """Wall time per step (us) of each Python part of `simulate`'s run
+    (`PARTS`), of the plant's contact solve where the logged seat forces
+    trigger it (every logged step; the others' solve is in the rest), and
+    of the rest (the plant's step elsewhere, Drake's framework: events,
+    primitives, logging), from one run of `signal` with the parts' methods
+    timed (about 0.3 us of timer per call is in the parts).  The parts sum
+    to the run's time per step ("total")."""
+    import importlib
+
+    clock = _Clock()
+    saved = []
+    for part, (module, name, methods) in PARTS.items():
+        cls = getattr(importlib.import_module(module), name)
+        for m in methods:
+            if m in vars(cls):
+                saved.append((cls, m, vars(cls)[m]))
+                setattr(cls, m, clock.timed(part, vars(cls)[m]))
+    seat = saved_calc = None
+    for cls, _, fn in saved:
+        if cls.__name__ == "SeatForces":
+            seat, saved_calc = cls, fn
+
+    if seat is not None:  # the contact solve that the seat forces' input triggers
+        timed_solve = clock.timed("plant's step (under the logged seat forces)",
+                                  lambda self, context: self._contacts.Eval(context))
+        timed_calc = clock.timed("seat forces (logged)", saved_calc)
+
+        def calc(self, context, output):
+            timed_solve(self, context)
+            timed_calc(self, context, output)
+        seat._calc = calc
+    try:
+        result = vibrate(params, settled, signal)
+    finally:
+        for cls, m, fn in saved:
+            setattr(cls, m, fn)
+    steps = round((signal.duration - signal.settle_time) / params.simulation.time_step_s)
+    us = {k: v / 1e3 / steps for k, v in clock.total.items()}
+    total = result.meta["wall_s"] * 1e6 / steps
+    us["rest (plant's step elsewhere, framework, logging)"] = total - sum(us.values())
+    us["total"] = total
+    return us
 
 
 def plant_only_real_time_factor(params, settled, duration: float = 5.0) -> float:
@@ -166,6 +256,14 @@ def main() -> None:
           f"real-time factor {result.meta['real_time_factor']:.2f}")
     print(f"  ({result.meta['wall_s'] / (args.duration / s.time_step_s) * 1e6:.0f} us per "
           "step)")
+    split_s = min(args.duration, 20.0)
+    split = step_split(params, settled, make_seat_signal(
+        "random", "xyz", 0.1941, split_s, 1, s.time_step_s, s.settle_time_s, s.onset_time_s))
+    print(f"per step, a second run of {split_s:g} s with the Python parts timed "
+          f"({split['total']:.0f} us per step):")
+    for part, us in split.items():
+        if part != "total":
+            print(f"  {part:<52} {us:6.0f} us  {100 * us / split['total']:3.0f}%")
     ceiling = plant_only_real_time_factor(params, settled)
     print(f"ceiling: the plant alone (contact solve, no controllers, no logging) runs at "
           f"{ceiling:.2f}x real time at rest ({s.time_step_s / ceiling * 1e6:.0f} us per step)")

@@ -429,3 +429,33 @@ def test_unknown_design_is_refused_by_name():
     with pytest.raises(ParameterError, match=r"simulation.design = 'fast'.*'implicit' or "
                                              r"'reference'"):
         params_from_dict({"simulation": {"design": "fast"}})
+
+
+def test_the_benchmark_books_every_python_part_of_a_step_and_restores_the_systems():
+    # `bench/bench_simulate.py`'s step split times the methods Drake calls by
+    # name: each must exist (a renamed one would drop out of the split
+    # unnoticed), each part must be met in a short run, and the systems'
+    # methods are the originals afterwards.
+    import importlib
+
+    from bench_scripts import bench_script
+
+    bench = bench_script("bench_simulate")
+    originals = {}
+    for _part, (module, name, methods) in bench.PARTS.items():
+        cls = getattr(importlib.import_module(module), name)
+        for m in methods:
+            assert m in vars(cls), f"{name}.{m} is gone: update bench_simulate.PARTS"
+            originals[(cls, m)] = vars(cls)[m]
+    p = load_params()
+    p.simulation.design, p.simulation.time_step_s = "implicit", 0.005
+    p.simulation.settle_time_s = p.simulation.onset_time_s = 0.2
+    settled = settle(p)
+    s = p.simulation
+    signal = make_seat_signal("random", "xyz", 0.2, 0.3, 1, s.time_step_s, s.settle_time_s,
+                              s.onset_time_s)
+    split = bench.step_split(p, settled, signal)
+    for part in ("force laws", "softening", "seat forces (logged)",
+                 "plant's step (under the logged seat forces)"):
+        assert split[part] > 0, part
+    assert all((cls, m) in originals and vars(cls)[m] is fn for (cls, m), fn in originals.items())
