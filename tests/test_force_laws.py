@@ -403,3 +403,107 @@ def test_the_merged_laws_convert_to_autodiff():
         e[j] = 1e-6
         fd = (force(x + e) - force(x - e)) / 2e-6
         np.testing.assert_allclose(gradient[:, j], fd, rtol=0, atol=1e-6 * np.max(np.abs(fd)))
+
+
+def _step_both_ways(laws, context):
+    """`ForceLaws`' step at `context` with its elementwise laws compiled
+    (`_laws_kernel`) and in NumPy."""
+    from pydrake.common.value import AbstractValue
+
+    out = []
+    for compiled in (True, False):
+        laws._compiled = compiled
+        value = AbstractValue.Make(None)
+        laws._calc_step(context, value)
+        out.append(value.get_value())
+    laws._compiled = True
+    return out
+
+
+@pytest.mark.parametrize("branches", [False, True])
+def test_the_compiled_laws_are_the_numpy_laws_bit_for_bit(branches):
+    """On the implicit design (Cardan chains, restraint constraints, contact
+    dampers) the compiled elementwise laws give the NumPy expressions'
+    numbers exactly at random states, with every branch of the restraint
+    law switched on (gating, cubic and linear normal forces, friction,
+    slipping anchors) or the model's own."""
+    from ehm_drake import jit
+
+    assert jit.available()  # (numba is a dependency; EHM_DRAKE_NO_JIT=1 is tested below)
+    model = build_diagram(implicit(), guard=False, seat_forces=False)
+    laws = model.systems["force_laws"]
+    assert laws._compiled
+    ctx = model.diagram.CreateDefaultContext()
+    lctx = laws.GetMyMutableContextFromRoot(ctx)
+    n = len(laws.restraint_points)
+    if branches:
+        pads = np.array([p.part.endswith("pad") for p in laws.restraint_points])
+        prm = lctx.get_mutable_numeric_parameter(laws.views["shear_restraints"].parameter_index)
+        v = prm.CopyToVector()
+        restraint_block(v, "contact_gated")[:] = pads
+        restraint_block(v, "normal_cubic_stiffness")[:] = 1e9
+        restraint_block(v, "normal_reference")[:] = -1e-3
+        restraint_block(v, "normal_linear_stiffness")[:] = np.linspace(0, 1e4, n)
+        restraint_block(v, "normal_linear_damping")[:] = 50.0
+        restraint_block(v, "friction_coefficient")[:] = np.where(pads, 0.0, 0.3)
+        restraint_block(v, "force_limit")[:] = 5.0
+        prm.SetFromVector(v)
+    plant, L = model.plant, laws._layout
+    pc = plant.GetMyMutableContextFromRoot(ctx)
+    x0 = plant.GetPositionsAndVelocities(pc)
+    rng = np.random.default_rng(8)
+    for _ in range(10):
+        x = x0.copy()
+        x[L.rot_q] += rng.uniform(-0.1, 0.1, L.num_rotational)
+        x[L.nq:] = rng.normal(scale=0.3, size=L.nv)
+        plant.SetPositionsAndVelocities(pc, x)
+        for port, value in (("seat_acceleration", rng.normal(scale=0.5, size=3)),
+                            ("seat_displacement", np.zeros(3))):
+            model.diagram.GetInputPort(port).FixValue(ctx, value)
+        lctx.SetDiscreteState(laws.views["joint_pid"].integral_state_index,
+                              rng.normal(scale=0.05, size=L.num_rotational))
+        lctx.SetDiscreteState(laws.views["shear_restraints"].slip_state_index,
+                              rng.normal(scale=2e-3, size=2 * n))
+        a, b = _step_both_ways(laws, lctx)
+        for name in ("f", "w", "slip_next", "z_next", "pid_force", "pid_torque",
+                     "passive_force", "fd", "his_torque", "pos", "pos_n"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+        assert np.any(a.fd != 0) and np.any(a.slip_next != 0)
+
+
+def test_without_numba_the_numpy_laws_give_the_same_forces():
+    """With EHM_DRAKE_NO_JIT=1 (as where numba is not installed) nothing is
+    compiled and the default implicit model's forces are those of the
+    compiled laws to 1e-12."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import json, numpy as np\n"
+        "from ehm_drake import jit\n"
+        "from ehm_drake.diagram import build_diagram\n"
+        "from ehm_drake.params import load_params\n"
+        "p = load_params(); p.simulation.design = 'implicit'; p.simulation.time_step_s = 0.005\n"
+        "m = build_diagram(p, guard=False, seat_forces=False)\n"
+        "ctx = m.diagram.CreateDefaultContext()\n"
+        "pc = m.plant.GetMyMutableContextFromRoot(ctx)\n"
+        "x = m.plant.GetPositionsAndVelocities(pc)\n"
+        "x[m.plant.num_positions():] = np.linspace(-0.3, 0.3, m.plant.num_velocities())\n"
+        "m.plant.SetPositionsAndVelocities(pc, x)\n"
+        "m.diagram.GetInputPort('seat_acceleration').FixValue(ctx, [0.3, -0.2, 0.5])\n"
+        "m.diagram.GetInputPort('seat_displacement').FixValue(ctx, [0.0, 0.0, 0.0])\n"
+        "f = m.plant.get_applied_generalized_force_input_port().Eval(pc)\n"
+        "print(json.dumps({'jit': jit.available(), 'compiled': m.systems['force_laws']._compiled,"
+        " 'f': f.tolist()}))\n")
+    out = {}
+    for flag in ("0", "1"):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           env=dict(os.environ, EHM_DRAKE_NO_JIT=flag), check=True)
+        out[flag] = json.loads(r.stdout.strip().splitlines()[-1])
+    assert out["0"]["jit"] and out["0"]["compiled"]
+    assert not out["1"]["jit"] and not out["1"]["compiled"]
+    f0, f1 = np.array(out["0"]["f"]), np.array(out["1"]["f"])
+    np.testing.assert_allclose(f1, f0, rtol=0, atol=1e-12 * np.max(np.abs(f0)))
+    assert np.max(np.abs(f0)) > 1.0

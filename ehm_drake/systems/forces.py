@@ -17,6 +17,10 @@ The laws are unchanged; the sum is ordered differently, so the forces
 differ from the five systems' sum by rounding only
 (`tests/test_force_laws.py` checks it to 1e-12 at random states).
 
+On float states with Cardan chains and no separate controller input (the
+implicit design) the elementwise laws run compiled
+(`ehm_drake.systems.compiled_laws`, numba; the same bits), else in NumPy.
+
 The parts keep their identities for the code that reads or changes them
 in a context (the static equilibrium, the gap diagnosis' families and
 extensions, tests): `ForceLaws.views` holds one `LawView` per former
@@ -38,6 +42,7 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from ..model.joint_layout import JointLayout
 from ..model.restraints import deepest_points
 from . import PlantScratch, define_system
+from .compiled_laws import NO_CONTACTS, compiled_laws, packed_constants
 from .his import head_in_space_torque
 from .joints import PID_PARAMETERS, _BallIndex, cardan_to_generalized, passive_torque
 from .rotations import rotation_from_rpy
@@ -198,7 +203,7 @@ class _Constants:
     """What the laws derive from the numeric parameters, once per value."""
 
     __slots__ = ("passive", "neg_k", "neutral", "neg_kp", "neg_ki", "neg_kd", "reference",
-                 "bound", "neg_bound", "his_kp", "his_kd", "his_R_ref_T", "restraint")
+                 "bound", "neg_bound", "his_kp", "his_kd", "his_R_ref_T", "restraint", "packed")
 
 
 class _Step:
@@ -278,6 +283,9 @@ def ForceLaws_(T):
             self._spine_v_x = nq + L.spine_v
             self._v_x = nq + self._v_index
             self._cardan_chains = not len(self._ball.roll)
+            # The compiled elementwise laws (`_laws_kernel`) where they apply.
+            self._compiled = (compiled_laws is not None and T is float and not feedback_input
+                              and self._cardan_chains)
 
             # Joint PID.
             *gains, implicit_kp = pid
@@ -450,6 +458,7 @@ def ForceLaws_(T):
             c.restraint = restraint_axis_parameters(
                 context.get_numeric_parameter(self._restraint_param).CopyToVector(),
                 self._geometry.axis_of)
+            c.packed = packed_constants(self, c) if self._compiled else None
             value.set_value(c)
 
         def _calc_step(self, context, value):
@@ -498,6 +507,11 @@ def ForceLaws_(T):
                 P, J_P, J_contact, pos_n = self._probe(p, ctx, W)
                 s.J = J = np.concatenate([J_P, J_head, J_trunk, J_com, J_contact])
             V = J @ x[nq:]
+            if self._compiled:
+                self._step_compiled(s, c, context, x, V, P, R_WH,
+                                    pos_n if self._contact_damping is not None else NO_CONTACTS)
+                value.set_value(s)
+                return
             n3 = 3 * len(self._points)
             if self._contact_damping is not None:
                 s.fd = contact_damping_force(self._contact_damping_g, self._face_g, pos_n,
@@ -577,6 +591,34 @@ def ForceLaws_(T):
             f[self._v_index] += s.passive_force
             s.f = f
             value.set_value(s)
+
+        def _step_compiled(self, s, c, context, x, V, P, R_WH, pos_n_contact):
+            """The rest of `_calc_step` with its elementwise laws compiled
+            (`_laws_kernel`: the same operations in the same order)."""
+            n = len(self._points)
+            n2, n3 = 2 * n, 3 * n
+            s.his_torque = tau = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
+                                                      V[n3:n3 + 3])
+            s.J_his = None
+            PV = self._M @ P.ravel(order="F") - self._m0
+            VV = self._M @ V[:n3]
+            s.pos, s.pos_n = PV[:n2], PV[n2:n3]
+            self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, s.J))
+            (s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
+             s.passive_force) = compiled_laws(x, PV, VV, V, n, self._discrete(context, self._slip),
+                                               self._discrete(context, self._z), pos_n_contact,
+                                               *c.packed)
+            F = self._M_T @ s.w
+            load = -self._mass * self._a_port.Eval(context)
+            if self._contact_damping is None:
+                s.G = np.concatenate([F, tau, -tau, load])
+            else:
+                s.fd = fd
+                s.G = np.concatenate([F, tau, -tau, load, fd])
+            f = s.J.T @ s.G
+            f[self._layout.rot_v] += s.pid_force
+            f[self._v_index] += s.passive_force
+            s.f = f
 
         def _update(self, context, discrete_state):
             s = self._step.Eval(context)
