@@ -146,6 +146,11 @@ def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
     d_own, J_own, _ = soft._calc_deformation_kin(sctx)
     assert np.array_equal(d_shared, d_own) and np.array_equal(J_shared, J_own)
     assert np.any(J_own != 0)
+    # Points measured from other anchors are not taken for its own.
+    rows = dict(laws._point_rows)
+    name = soft._args[3][0].name
+    rows[name] = rows[name][:3] + (rows[name][3] + 1e-3,)
+    assert soft._rows_in(rows) is None and soft._rows_in(laws._point_rows) is not None
 
 
 def test_the_default_diagram_sums_the_laws_and_the_softening():

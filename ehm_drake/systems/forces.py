@@ -58,7 +58,8 @@ from .seat import (
 )
 
 #: What `ForceLaws` shares on the plant's scratch context at each state
-#: (`PlantScratch.share`): ({point name: (index, first row in J)}, normal
+#: (`PlantScratch.share`): ({point name: (index, first row in J, normal,
+#: normal offset of the anchor)}, normal
 #: displacement per point (point order, m), J (its first 3n rows the points'
 #: translational Jacobian, body by body)).
 RESTRAINT_NORMALS = "restraint normals"
@@ -308,8 +309,10 @@ def ForceLaws_(T):
             check_restraint_parameters(r_params, len(points))
             self._points = list(points)
             self._geometry = g = RestraintGeometry(p, points)
-            # Per point name: its index (point order) and its three rows in J.
-            self._point_rows = {pt.name: (i, 3 * int(g.grouped_row[i]))
+            # Per point name: its index (point order), its three rows in J and
+            # what its normal displacement is measured from (normal, n0).
+            self._point_rows = {pt.name: (i, 3 * int(g.grouped_row[i]), tuple(pt.normal),
+                                          float(g.n0[i]))
                                 for i, pt in enumerate(points)}
             self._constraints = constraints
             self._contact_damping = (None if contact_damping is None

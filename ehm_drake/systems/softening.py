@@ -186,14 +186,16 @@ def BodySoftening_(T):
             key = id(point_rows)
             if self._shared_rows[0] != key:
                 found = None
-                if all(pt.name in point_rows for pt in self._args[3]):
-                    normal = np.array([pt.normal for pt in self._args[3]], float)
-                    axis = np.argmax(np.abs(normal), axis=1)
-                    if np.array_equal(np.abs(normal), np.eye(3)[axis]):
-                        at = [point_rows[pt.name] for pt in self._args[3]]
-                        found = (np.array([i for i, _ in at]),
-                                 np.array([r for _, r in at]) + axis,
-                                 normal[np.arange(len(axis)), axis][:, None])
+                points = self._args[3]
+                at = [point_rows.get(pt.name) for pt in points]
+                normal = np.array([pt.normal for pt in points], float)
+                axis = np.argmax(np.abs(normal), axis=1)
+                # The same points, measured from the same anchors, along axes.
+                if (all(a is not None and a[2] == tuple(pt.normal) and a[3] == n0
+                        for a, pt, n0 in zip(at, points, self._geometry.n0, strict=True))
+                        and np.array_equal(np.abs(normal), np.eye(3)[axis])):
+                    found = (np.array([a[0] for a in at]), np.array([a[1] for a in at]) + axis,
+                             normal[np.arange(len(axis)), axis][:, None])
                 # (the dict is kept alive with its key: ids are not reused)
                 self._shared_rows = (key, found, point_rows)
             return self._shared_rows[1]
