@@ -5,7 +5,8 @@ restraints' limits, law and slip, the restraint constraints' force, the
 PID and its integral, the passive joints) element by element in their
 order, so that the numbers are the same bits
 (tests/test_force_laws.py).  Used for float states on Cardan chains with
-no separate controller input (the implicit design); the products with the
+no separate controller input (both designs: the ball joints' trigonometric
+terms computed in NumPy); the products with the
 Jacobian and the projections stay in NumPy, the kinematics in Drake.
 """
 
@@ -30,9 +31,27 @@ if available():  # (called by the compiled kernel below: compiled too)
     _max, _min = kernel(_max), kernel(_min)
 
 
-def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, flags,
-                 constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm, q_index,
-                 v_x, period):
+def _cardan_to_generalized(tau, ball, trig):
+    """`cardan_to_generalized` (N(q)^T on the ball joints) with its
+    trigonometric terms given: `ball` (3 x nb: roll, pitch, yaw indices),
+    `trig` (5 x nb: cos pitch, cos yaw, sin yaw, tan pitch, sin pitch)."""
+    f = tau.copy()
+    for b in range(ball.shape[1]):
+        r, p, y = ball[0, b], ball[1, b], ball[2, b]
+        cp, cy, sy, tp = trig[0, b], trig[1, b], trig[2, b], trig[3, b]
+        u = tau[r] / cp + tau[y] * tp
+        f[r] = cy * u - sy * tau[p]
+        f[p] = sy * u + cy * tau[p]
+    return f
+
+
+if available():  # (called by the compiled kernel below: compiled too)
+    _cardan_to_generalized = kernel(_cardan_to_generalized)
+
+
+def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, point_prm,
+                 flags, constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm,
+                 q_index, v_x, period):
     """The elementwise part of `ForceLaws`' step on a float state with
     Cardan chains and no controller input, compiled (`ehm_drake.jit`): the
     contact dampers (`contact_damping_force`), the restraints' limits, law
@@ -42,10 +61,12 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, f
     element, in their order (the same bits: tests/test_force_laws.py).
     The products with the Jacobian and the projections stay in NumPy.
 
+    `ball`, `trig`: the ball joints' Cardan indices and their trigonometric
+    terms (`_cardan_to_generalized`; none on Cardan chains);
     `axis_prm` (6 x 2n): k, c, force limit, mu, contact stiffness, k_safe;
     `point_prm` (6 x n): face, gated, k3, ref, k_lin, c_lin; `flags`:
     friction, gated, normal terms, constraints, contact dampers, implicit
-    kp, implicit passive part, damping remainder; `constraint_prm`
+    kp, implicit passive part, damping remainder, ball joints; `constraint_prm`
     (3 x 2n): stiffness, length, step damping; `contact_prm` (2 x n,
     grouped): damping, face; `pid_prm` (7 x n_rot): reference, -kp, -ki,
     -kd, bound, -bound, implicit kp; `passive_prm` (4 x n_rot + 1): -k,
@@ -54,7 +75,7 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, f
     n2, n3 = 2 * n, 3 * n
     friction, gated_any, normal_terms = flags[0] != 0, flags[1] != 0, flags[2] != 0
     constraints, dampers, implicit_kp = flags[3] != 0, flags[4] != 0, flags[5] != 0
-    implicit, damping = flags[6] != 0, flags[7] != 0
+    implicit, damping, balls = flags[6] != 0, flags[7] != 0, flags[8] != 0
     nc = n2 if constraints else 0
     w = np.empty(n3 + 3 * nc)
     slip_next = np.empty(n2)
@@ -103,7 +124,7 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, f
         e = x[rot_q[i]] - pid_prm[0, i]
         pi = pid_prm[1, i] * e + pid_prm[2, i] * z[i]
         pid_torque[i] = pi + pid_prm[3, i] * x[rot_v_x[i]]
-        pid_force[i] = pi + pid_prm[6, i] * x[rot_q[i]] if implicit_kp else pi
+        pid_force[i] = pi + pid_prm[6, i] * x[rot_q[i]] if implicit_kp and not balls else pi
         z_next[i] = _min(_max(z[i] + period * e, pid_prm[5, i]), pid_prm[4, i])
     passive = np.empty(q_index.shape[0])
     for i in range(q_index.shape[0]):
@@ -111,9 +132,28 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, f
         t = passive_prm[0, i] * (q - passive_prm[1, i])
         if implicit:
             t = t + passive_prm[2, i] * q
-        if damping:
+        if damping and not balls:
             t = t - passive_prm[3, i] * x[v_x[i]]
         passive[i] = t
+    if balls:  # `passive_torque` and the PID's mapping on ball joints
+        pid_force = _cardan_to_generalized(pid_force, ball, trig)
+        if damping:
+            rates = np.empty(m)  # `cardan_rates`
+            for i in range(m):
+                rates[i] = x[v_x[i]]
+            for b in range(ball.shape[1]):
+                r, p, y = ball[0, b], ball[1, b], ball[2, b]
+                cp, cy, sy, sp = trig[0, b], trig[1, b], trig[2, b], trig[4, b]
+                wx, wy = x[v_x[r]], x[v_x[p]]
+                u = (cy * wx + sy * wy) / cp
+                rates[r] = u
+                rates[p] = cy * wy - sy * wx
+                rates[y] = x[v_x[y]] + u * sp
+            for i in range(m):
+                passive[i] = passive[i] - passive_prm[3, i] * rates[i]
+            if passive_prm[3, m] != 0.0:
+                passive[m] = passive[m] - passive_prm[3, m] * x[v_x[m]]
+        passive = _cardan_to_generalized(passive, ball, trig)
     return w, slip_next, fd, pid_force, pid_torque, z_next, passive
 
 
@@ -121,6 +161,18 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, axis_prm, point_prm, f
 compiled_laws = kernel(_laws_kernel)
 #: The contact points' normal displacements where there are no contact dampers.
 NO_CONTACTS = np.zeros(0)
+#: The ball joints' trigonometric terms on Cardan chains (none).
+NO_BALLS = np.zeros((5, 0))
+
+
+def ball_trigonometry(laws, x):
+    """The ball joints' trigonometric terms at plant state `x` as
+    `_laws_kernel` takes them (NumPy's functions: the NumPy path's numbers)."""
+    if laws._cardan_chains:
+        return NO_BALLS
+    q_rot = x[laws._layout.rot_q]
+    p, y = q_rot[laws._ball.pitch], q_rot[laws._ball.yaw]
+    return np.array([np.cos(p), np.cos(y), np.sin(y), np.tan(p), np.sin(p)])
 
 
 def packed_constants(laws, c):
@@ -137,7 +189,7 @@ def packed_constants(laws, c):
                       r["any_cubic"] or r["any_linear"], k is not None,
                       laws._contact_damping is not None,
                       laws._implicit_kp is not None, laws._implicit is not None,
-                      laws._damping is not None], np.int64)
+                      laws._damping is not None, not laws._cardan_chains], np.int64)
     constraint_prm = (np.zeros((3, 0)) if k is None else
                       np.array([k.stiffness, k.length, k.step_damping], float))
     contact_prm = (np.zeros((2, 0)) if laws._contact_damping is None else
@@ -149,9 +201,10 @@ def packed_constants(laws, c):
     passive_prm = np.array([c.neg_k, c.neutral,
                             zero if laws._implicit is None else laws._implicit,
                             zero if laws._damping is None else laws._damping])
-    return (axis_prm, point_prm, flags, constraint_prm, contact_prm, pid_prm,
+    ball = np.array([laws._ball.roll, laws._ball.pitch, laws._ball.yaw], np.int64)
+    return (ball, axis_prm, point_prm, flags, constraint_prm, contact_prm, pid_prm,
             laws._layout.rot_q, laws._rot_v_x, passive_prm, laws._q_index, laws._v_x,
             laws._period)
 
 
-__all__ = ["NO_CONTACTS", "compiled_laws", "packed_constants"]
+__all__ = ["NO_BALLS", "NO_CONTACTS", "ball_trigonometry", "compiled_laws", "packed_constants"]

@@ -17,9 +17,9 @@ The laws are unchanged; the sum is ordered differently, so the forces
 differ from the five systems' sum by rounding only
 (`tests/test_force_laws.py` checks it to 1e-12 at random states).
 
-On float states with Cardan chains and no separate controller input (the
-implicit design) the elementwise laws run compiled
-(`ehm_drake.systems.compiled_laws`, numba; the same bits), else in NumPy.
+On float states with no separate controller input the elementwise laws run
+compiled (`ehm_drake.systems.compiled_laws`, numba; the same bits), else in
+NumPy.
 
 The parts keep their identities for the code that reads or changes them
 in a context (the static equilibrium, the gap diagnosis' families and
@@ -42,7 +42,7 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from ..model.joint_layout import JointLayout
 from ..model.restraints import deepest_points
 from . import PlantScratch, define_system
-from .compiled_laws import NO_CONTACTS, compiled_laws, packed_constants
+from .compiled_laws import NO_CONTACTS, ball_trigonometry, compiled_laws, packed_constants
 from .his import head_in_space_torque
 from .joints import PID_PARAMETERS, _BallIndex, cardan_to_generalized, passive_torque
 from .rotations import rotation_from_rpy
@@ -285,8 +285,7 @@ def ForceLaws_(T):
             self._v_x = nq + self._v_index
             self._cardan_chains = not len(self._ball.roll)
             # The compiled elementwise laws (`_laws_kernel`) where they apply.
-            self._compiled = (compiled_laws is not None and T is float and not feedback_input
-                              and self._cardan_chains)
+            self._compiled = compiled_laws is not None and T is float and not feedback_input
 
             # Joint PID.
             *gains, implicit_kp = pid
@@ -607,10 +606,11 @@ def ForceLaws_(T):
             VV = self._M @ V[:n3]
             s.pos, s.pos_n = PV[:n2], PV[n2:n3]
             self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, s.J))
+            ball, *packed = c.packed
             (s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
              s.passive_force) = compiled_laws(x, PV, VV, V, n, self._discrete(context, self._slip),
                                                self._discrete(context, self._z), pos_n_contact,
-                                               *c.packed)
+                                               ball, ball_trigonometry(self, x), *packed)
             F = self._M_T @ s.w
             load = -self._mass * self._a_port.Eval(context)
             if self._contact_damping is None:
