@@ -4,10 +4,10 @@
 restraints' limits, law and slip, the restraint constraints' force, the
 PID and its integral, the passive joints) element by element in their
 order, so that the numbers are the same bits
-(tests/test_force_laws.py).  Used for float states on Cardan chains with
-no separate controller input (both designs: the ball joints' trigonometric
-terms computed in NumPy); the products with the
-Jacobian and the projections stay in NumPy, the kinematics in Drake.
+(tests/test_force_laws.py).  Used for float states with no separate
+controller input, on both designs (the ball joints' cosines, sines and
+tangents computed in NumPy); the products with the Jacobian and the
+projections stay in NumPy, the kinematics in Drake.
 """
 
 from __future__ import annotations
@@ -52,8 +52,8 @@ if available():  # (called by the compiled kernel below: compiled too)
 def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, point_prm,
                  flags, constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm,
                  q_index, v_x, period):
-    """The elementwise part of `ForceLaws`' step on a float state with
-    Cardan chains and no controller input, compiled (`ehm_drake.jit`): the
+    """The elementwise part of `ForceLaws`' step on a float state with no
+    separate controller input, compiled (`ehm_drake.jit`): the
     contact dampers (`contact_damping_force`), the restraints' limits, law
     and slip (`restraint_limits`, `restraint_law`, `slip_update`), the
     constraints' force at the step's start, the PID and its integral, the
