@@ -7,6 +7,8 @@ it must keep the parts addressable under their old names."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from pydrake.systems.framework import BasicVector, DiagramBuilder
@@ -431,7 +433,9 @@ def test_the_compiled_laws_are_the_numpy_laws_bit_for_bit(design, branches):
     slipping anchors) or the model's own."""
     from ehm_drake import jit
 
-    assert jit.available()  # (numba is a dependency; EHM_DRAKE_NO_JIT=1 is tested below)
+    if not jit.available():  # (numba is a dependency; EHM_DRAKE_NO_JIT=1 is tested below)
+        assert os.environ.get("EHM_DRAKE_NO_JIT", "") not in ("", "0")
+        pytest.skip("the compiled laws are switched off (EHM_DRAKE_NO_JIT)")
     params = implicit() if design == "implicit" else reference_design(load_params(PAPER))
     model = build_diagram(params, guard=False, seat_forces=False)
     laws = model.systems["force_laws"]

@@ -5,6 +5,8 @@ iteration, and the nonlinear simulation against it."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -120,8 +122,9 @@ def test_the_compiled_spring_is_the_law(monkeypatch):
     law = np.array([element_spring(el, row) for row in s])
     assert np.allclose(compiled, law, rtol=1e-12, atol=0.0)
     assert np.all(law[:, :2] >= 0) and np.all(law[:, 2] <= 0)
-    # (CI installs numba: the comparison above compared two paths.)
-    assert jit.available()
+    # (numba is a dependency: the comparison above compared two paths, unless
+    # the compiled kernels were switched off on purpose.)
+    assert jit.available() or os.environ.get("EHM_DRAKE_NO_JIT", "") not in ("", "0")
 
 
 def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
