@@ -175,23 +175,26 @@ def test_the_merged_laws_are_the_separate_systems(design, variant):
         _compare(rig)
 
 
+def _every_branch(v, points):
+    """Switch on every branch of the restraint law in the packed parameter
+    vector `v` of `points`: contact gating (the pads), cubic and linear
+    normal forces, friction (elsewhere), small force limits (anchors slip)."""
+    n = len(points)
+    pads = np.array([p.part.endswith("pad") for p in points])
+    restraint_block(v, "contact_gated")[:] = pads
+    restraint_block(v, "normal_cubic_stiffness")[:] = 1e9
+    restraint_block(v, "normal_reference")[:] = -1e-3
+    restraint_block(v, "normal_linear_stiffness")[:] = np.linspace(0, 1e4, n)
+    restraint_block(v, "normal_linear_damping")[:] = 50.0
+    restraint_block(v, "friction_coefficient")[:] = np.where(pads, 0.0, 0.3)
+    restraint_block(v, "force_limit")[:] = 5.0
+
+
 def test_every_branch_of_the_restraint_law_agrees():
     """Contact gating, cubic and linear normal forces, Coulomb friction and
     a slipping anchor (deflection beyond the force limit) in both."""
     rig = Rig(implicit())
-    n = len(rig.laws.restraint_points)
-    pads = np.array([p.part.endswith("pad") for p in rig.laws.restraint_points])
-
-    def change(v):
-        restraint_block(v, "contact_gated")[:] = pads
-        restraint_block(v, "normal_cubic_stiffness")[:] = 1e9
-        restraint_block(v, "normal_reference")[:] = -1e-3
-        restraint_block(v, "normal_linear_stiffness")[:] = np.linspace(0, 1e4, n)
-        restraint_block(v, "normal_linear_damping")[:] = 50.0
-        restraint_block(v, "friction_coefficient")[:] = np.where(pads, 0.0, 0.3)
-        restraint_block(v, "force_limit")[:] = 5.0  # small: anchors slip
-
-    rig.set_restraint_parameters(change)
+    rig.set_restraint_parameters(lambda v: _every_branch(v, rig.laws.restraint_points))
     rng = np.random.default_rng(5)
     for i in range(8):
         rig.randomize(rng, delayed=i % 2 == 1)
@@ -444,16 +447,9 @@ def test_the_compiled_laws_are_the_numpy_laws_bit_for_bit(design, branches):
     lctx = laws.GetMyMutableContextFromRoot(ctx)
     n = len(laws.restraint_points)
     if branches:
-        pads = np.array([p.part.endswith("pad") for p in laws.restraint_points])
         prm = lctx.get_mutable_numeric_parameter(laws.views["shear_restraints"].parameter_index)
         v = prm.CopyToVector()
-        restraint_block(v, "contact_gated")[:] = pads
-        restraint_block(v, "normal_cubic_stiffness")[:] = 1e9
-        restraint_block(v, "normal_reference")[:] = -1e-3
-        restraint_block(v, "normal_linear_stiffness")[:] = np.linspace(0, 1e4, n)
-        restraint_block(v, "normal_linear_damping")[:] = 50.0
-        restraint_block(v, "friction_coefficient")[:] = np.where(pads, 0.0, 0.3)
-        restraint_block(v, "force_limit")[:] = 5.0
+        _every_branch(v, laws.restraint_points)
         prm.SetFromVector(v)
     plant, L = model.plant, laws._layout
     pc = plant.GetMyMutableContextFromRoot(ctx)
