@@ -1,6 +1,6 @@
 """The elementwise part of `ForceLaws`' step compiled with numba
 (`ehm_drake.jit`): the NumPy expressions of
-`ehm_drake.systems.forces.ForceLaws._calc_step` (the contact dampers, the
+`ehm_drake.systems.forces.ForceLaws._elementwise_laws` (the contact dampers, the
 restraints' limits, law and slip, the restraint constraints' force, the
 PID and its integral, the passive joints) element by element in their
 order, so that the numbers are the same bits
@@ -57,7 +57,7 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, 
     contact dampers (`contact_damping_force`), the restraints' limits, law
     and slip (`restraint_limits`, `restraint_law`, `slip_update`), the
     constraints' force at the step's start, the PID and its integral, the
-    passive joints: the NumPy expressions of `_calc_step` element by
+    passive joints: the NumPy expressions of `_elementwise_laws` element by
     element, in their order (the same bits: tests/test_force_laws.py).
     The products with the Jacobian and the projections stay in NumPy.
 

@@ -501,23 +501,16 @@ def ForceLaws_(T):
                       for frame, P_B, _ in groups), J_head, J_trunk, J_com])
                 P = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
                                     for frame, P_B, _ in groups], axis=1)
+                pos_n_contact = NO_CONTACTS
             else:
                 # The restraint points and, in the same calls, the contact
                 # points, where the explicit half of each contact damper acts.
                 # Their Jacobian's normal rows go last in J (velocities and
                 # forces in the same products).
-                P, J_P, J_contact, pos_n = self._probe(p, ctx, W)
+                P, J_P, J_contact, pos_n_contact = self._probe(p, ctx, W)
                 s.J = J = np.concatenate([J_P, J_head, J_trunk, J_com, J_contact])
             V = J @ x[nq:]
-            if self._compiled:
-                self._step_compiled(s, c, context, x, V, P, R_WH,
-                                    pos_n if self._contact_damping is not None else NO_CONTACTS)
-                value.set_value(s)
-                return
             n3 = 3 * len(self._points)
-            if self._contact_damping is not None:
-                s.fd = contact_damping_force(self._contact_damping_g, self._face_g, pos_n,
-                                             V[n3 + 9:])
             # Head-in-space.
             w_WH = V[n3:n3 + 3] if self._feedback_port is None else J_head @ xf[nq:]
             s.his_torque = tau = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
@@ -527,12 +520,51 @@ def ForceLaws_(T):
             n2 = 2 * len(self._points)
             PV = self._M @ P.ravel(order="F") - self._m0
             VV = self._M @ V[:n3]
-            s.pos, s.pos_n = pos, pos_n = PV[:n2], PV[n2:n3]
+            s.pos, s.pos_n = PV[:n2], PV[n2:n3]
             # The points' normal displacements and Jacobian at this state for
             # the body's softening (`BodySoftening`), which would compute them
             # again.
-            self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, pos_n, J))
+            self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, J))
             slip = self._discrete(context, self._slip)
+            z = self._discrete(context, self._z)
+            if self._compiled:  # the elementwise laws below in one compiled call
+                ball, *packed = c.packed
+                (s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
+                 s.passive_force) = compiled_laws(x, PV, VV, V, len(self._points), slip, z,
+                                                  pos_n_contact, ball,
+                                                  ball_trigonometry(self, x), *packed)
+                if self._contact_damping is not None:
+                    s.fd = fd
+            else:
+                self._elementwise_laws(s, c, x, xf, V, PV, VV, slip, z, pos_n_contact)
+            F = self._M_T @ s.w
+            # The sum: restraints, head-in-space (+tau on the head, -tau on
+            # the trunk), inertial load -m a at the centre of mass, joints.
+            s.G = np.concatenate([F, tau, -tau, -self._mass * self._a_port.Eval(context)]
+                                 if self._contact_damping is None else
+                                 [F, tau, -tau, -self._mass * self._a_port.Eval(context), s.fd])
+            if self._feedback_port is not None:  # head-in-space mapped at xf
+                s.G[n3:n3 + 6] = 0.0
+                f = J.T @ s.G + s.J_his.T @ tau
+            else:
+                f = J.T @ s.G
+            f[L.rot_v] += s.pid_force
+            f[self._v_index] += s.passive_force
+            s.f = f
+            value.set_value(s)
+
+        def _elementwise_laws(self, s, c, x, xf, V, PV, VV, slip, z, pos_n_contact):
+            """The laws of `_calc_step` point by point and joint by joint, in
+            NumPy (AutoDiffXd, a separate controller input, or no numba;
+            `compiled_laws` is the same in one compiled call): the contact
+            dampers, the restraints and constraints (``s.w``), the slip,
+            the PID and its integral, the passive joints."""
+            L = self._layout
+            n2, n3 = 2 * len(self._points), 3 * len(self._points)
+            pos, pos_n = s.pos, s.pos_n
+            if self._contact_damping is not None:
+                s.fd = contact_damping_force(self._contact_damping_g, self._face_g,
+                                             pos_n_contact, V[n3 + 9:])
             face = self._geometry.face
             fmax = restraint_limits(c.restraint, face, pos_n)
             f_t, f_n = restraint_law(c.restraint, face, pos, VV[:n2], pos_n, VV[n2:n3], slip,
@@ -549,13 +581,11 @@ def ForceLaws_(T):
                 s.w = np.concatenate([f_t, f_n, (sc[:, None] * u).reshape(-1)])
             else:
                 s.w = np.concatenate([f_t, f_n])
-            F = self._M_T @ s.w
             s.slip_next = slip_update(c.restraint, face, pos, pos_n, slip, fmax)
             # Joint PID (its derivative is the plant's joint damping; the
             # plant's PD actuators apply implicit_kp about 0) and the update
             # of its integral.  Its torques are Cardan torques, as the
             # springs': on ball joints mapped by N(q)^T at the plant's q.
-            z = self._discrete(context, self._z)
             e = xf[L.rot_q] - c.reference
             s.pid_force = pi = c.neg_kp * e + c.neg_ki * z
             s.pid_torque = pi + c.neg_kd * xf[self._rot_v_x]
@@ -579,49 +609,6 @@ def ForceLaws_(T):
                 s.passive_force = passive_torque(c.passive, x[self._q_index], x[self._rot_v_x],
                                                  x[self._spine_v_x], self._ball, self._implicit,
                                                  self._damping)
-            # The sum: restraints, head-in-space (+tau on the head, -tau on
-            # the trunk), inertial load -m a at the centre of mass, joints.
-            s.G = np.concatenate([F, tau, -tau, -self._mass * self._a_port.Eval(context)]
-                                 if self._contact_damping is None else
-                                 [F, tau, -tau, -self._mass * self._a_port.Eval(context), s.fd])
-            if self._feedback_port is not None:  # head-in-space mapped at xf
-                s.G[n3:n3 + 6] = 0.0
-                f = J.T @ s.G + s.J_his.T @ tau
-            else:
-                f = J.T @ s.G
-            f[L.rot_v] += s.pid_force
-            f[self._v_index] += s.passive_force
-            s.f = f
-            value.set_value(s)
-
-        def _step_compiled(self, s, c, context, x, V, P, R_WH, pos_n_contact):
-            """The rest of `_calc_step` with its elementwise laws compiled
-            (`_laws_kernel`: the same operations in the same order)."""
-            n = len(self._points)
-            n2, n3 = 2 * n, 3 * n
-            s.his_torque = tau = head_in_space_torque(c.his_kp, c.his_kd, R_WH, c.his_R_ref_T,
-                                                      V[n3:n3 + 3])
-            s.J_his = None
-            PV = self._M @ P.ravel(order="F") - self._m0
-            VV = self._M @ V[:n3]
-            s.pos, s.pos_n = PV[:n2], PV[n2:n3]
-            self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, s.J))
-            ball, *packed = c.packed
-            (s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
-             s.passive_force) = compiled_laws(x, PV, VV, V, n, self._discrete(context, self._slip),
-                                               self._discrete(context, self._z), pos_n_contact,
-                                               ball, ball_trigonometry(self, x), *packed)
-            F = self._M_T @ s.w
-            load = -self._mass * self._a_port.Eval(context)
-            if self._contact_damping is None:
-                s.G = np.concatenate([F, tau, -tau, load])
-            else:
-                s.fd = fd
-                s.G = np.concatenate([F, tau, -tau, load, fd])
-            f = s.J.T @ s.G
-            f[self._layout.rot_v] += s.pid_force
-            f[self._v_index] += s.passive_force
-            s.f = f
 
         def _update(self, context, discrete_state):
             s = self._step.Eval(context)
