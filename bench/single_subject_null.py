@@ -18,9 +18,12 @@ from blind runs made without a reference group, e.g.
 and prints, per reality, the subjects named under the shipped rule (with a
 Clopper-Pearson 95% upper bound of the rate), the statistic's quantiles,
 the smallest threshold under which at most `alpha` of the subjects are
-named, and per direction the band of the reports' resonance shift against
-the model (data - model factor per doubling of the level) that holds all
-but `alpha` of the subjects.  `--out` writes the per-subject values; such
+named, per direction the band of the reports' resonance shift against the
+model (data - model factor per doubling of the level) that holds all but
+`alpha` of the subjects, and how many the level rule names
+(`resonance.softening_rule`; for reports made before it, from their shift
+alone, without its noise guard: an upper bound).  A subject counts as named
+when either rule names it.  `--out` writes the per-subject values; such
 a file given in place of a run adds its subjects (a subject met twice, the
 same reality, blind seed and trial, counts once), so a calibration can grow
 over several sessions (docs/history/data/single_subject_null.json holds the
@@ -46,6 +49,7 @@ def subject_statistic(report: dict) -> dict:
     level than the refitted model's (data - model factor; negative: the
     subject softens more)."""
     st = report.get("structural") or {}
+    rule = report.get("level_rule")
     beyond = [e["reduction_beyond"] for e in st.get("ranking", []) if e["delta_bic"] < 0]
     ranking = report.get("ranking") or []
     resonance = (report.get("evidence") or {}).get("resonance") or {}
@@ -57,7 +61,25 @@ def subject_statistic(report: dict) -> dict:
             "structural_ran": bool(st.get("ran")),
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
             "structural_best": next((e["effect"] for e in st.get("ranking", [])
-                                     if e["delta_bic"] < 0), None)}
+                                     if e["delta_bic"] < 0), None),
+            **({"level_rule_named": bool(rule["named"])} if rule else {})}
+
+
+def level_rule_names(subject: dict) -> bool:
+    """Whether the level rule names softening on this subject: as its report
+    said, or, for a report made before the rule, from its vertical shift
+    against the rule's threshold (without the noise guard)."""
+    from ehm_drake.gap.single.resonance import SOFTENING_SHIFT
+
+    if "level_rule_named" in subject:
+        return subject["level_rule_named"]
+    return subject.get("resonance_difference", {}).get("z", 0.0) < -SOFTENING_SHIFT
+
+
+def named_effect(subject: dict) -> str | None:
+    """The effect a subject's single-subject diagnosis names under the rules
+    shipped now (the structural rule's, else the level rule's)."""
+    return subject["named"] or ("softening" if level_rule_names(subject) else None)
 
 
 def collect(runs) -> dict:
@@ -146,10 +168,11 @@ def resonance_band(subjects: list, alpha: float) -> dict:
 
 def summary(subjects: list, alpha: float) -> dict:
     n = len(subjects)
-    named = [s for s in subjects if s["named"]]
+    named = [named_effect(s) for s in subjects if named_effect(s)]
     stat = [s["structural_statistic"] for s in subjects]
     return {"subjects": n, "named": len(named),
-            "named_effects": sorted({s["named"] for s in named}),
+            "named_effects": sorted(set(named)),
+            "level_rule_named": sum(map(level_rule_names, subjects)),
             "rate": len(named) / n, "rate_upper_95": upper_bound(len(named), n),
             "structural_ran": sum(s["structural_ran"] for s in subjects),
             "statistic_quantiles": {q: float(np.quantile(stat, q)) for q in (0.5, 0.9, 1.0)},
@@ -159,6 +182,7 @@ def summary(subjects: list, alpha: float) -> dict:
 
 def main(argv=None) -> None:
     from ehm_drake.gap.single.discrepancy import EXPLAINED_BEYOND
+    from ehm_drake.gap.single.resonance import SOFTENING_SHIFT
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+")
@@ -167,7 +191,8 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     data = gather(a.runs)
     print(f"structural threshold shipped: {EXPLAINED_BEYOND:.2f} of the gap beyond the "
-          "discrepancy")
+          f"discrepancy; level rule: vertical resonance shift below {-SOFTENING_SHIFT:+.3f} "
+          "per doubling")
     for reality, subjects in sorted(data.items()):
         s = summary(subjects, a.alpha)
         q = s["statistic_quantiles"]
@@ -176,7 +201,7 @@ def main(argv=None) -> None:
               f"{', '.join(s['named_effects']) or 'none'}); structural pass ran on "
               f"{s['structural_ran']}; statistic median {q[0.5]:.3f}, 90% {q[0.9]:.3f}, "
               f"max {q[1.0]:.3f}; threshold for <= {100 * a.alpha:.0f}%: "
-              f"{s['threshold_at_alpha']:.3f}")
+              f"{s['threshold_at_alpha']:.3f}; level rule names {s['level_rule_named']}")
         for d, r in s["resonance"].items():
             lo, hi = r["band_at_alpha"]
             print(f"  {d}: resonance factor per doubling, data - model, over {r['subjects']} "

@@ -467,3 +467,83 @@ def test_resonance_shift_compares_the_subjects_softening_with_the_models():
     e = resonance_shift(rows.take(rows.segment != "head"))["z"]
     assert set(e["segments"]) == {"pelvis", "trunk"}
     assert e["data_per_doubling"] == pytest.approx(0.8, abs=0.005)
+
+
+def test_shift_noise_is_the_scatter_that_measurement_noise_gives_the_shift():
+    """The data's per-doubling factor, measured again and again with 1% noise
+    per component (coherence and averages stating that error), scatters as
+    much as `shift_noise` predicts from one measurement; stated noise ten
+    times larger gives a standard deviation several times larger (less than
+    ten: the smoothing over bins averages part of it away)."""
+    from ehm_drake.gap.single.resonance import resonance_shift, shift_noise
+
+    rng = np.random.default_rng(11)
+    factors, predicted = [], []
+    for _ in range(40):
+        rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)
+        # (1 - g2) / (2 n g2) = 1e-4 per component, n = 20 averages.
+        rows.coherence[:] = 1.0 / (1.0 + 40e-4)
+        rows.n_averages[:] = 20.0
+        e = resonance_shift(rows, Hm)["z"]
+        factors.append(e["data_per_doubling"])
+        predicted.append(e["data_per_doubling_std"])
+    scatter = np.std(factors)
+    assert 0.6 < np.median(predicted) / scatter < 1.6, (np.median(predicted), scatter)
+    rows.coherence[:] = 1.0 / (1.0 + 40e-2)
+    noisier = shift_noise(rows, "z", 0.3, 0.6, ["pelvis", "trunk", "head"])
+    assert 3.0 < noisier / np.median(predicted) < 12.0
+
+
+def test_level_rule_names_softening_beyond_the_models_own():
+    """One subject at two levels: the level rule names softening when the
+    vertical resonance falls clearly more than the refitted model's (x0.80
+    against x0.92), not when it falls as much (x0.80 against x0.82) or less,
+    not when the noise stated by the data could make the difference, and not
+    over an effect already named; the report says so."""
+    from ehm_drake.gap.report import _resonance_lines
+    from ehm_drake.gap.single.resonance import (
+        SOFTENING_SHIFT,
+        apply_softening_rule,
+        resonance_shift,
+        softening_rule,
+    )
+
+    rng = np.random.default_rng(5)
+    for fn_model, named in (((5.0, 4.6), True), ((5.0, 4.1), False), ((5.0, 3.5), False)):
+        rows, Hm = _level_rows((5.0, 4.0), fn_model, rng=rng)
+        rule = softening_rule(resonance_shift(rows, Hm))
+        assert rule["named"] is named, (fn_model, rule)
+        assert rule["difference"] == pytest.approx(0.8 - fn_model[1] / fn_model[0], abs=0.015)
+        assert rule["threshold"] == -SOFTENING_SHIFT
+    # The same shift with data whose stated error is 30% per component: not named.
+    rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)
+    rows.coherence[:] = 0.3
+    rows.n_averages[:] = 4.0
+    rule = softening_rule(resonance_shift(rows, Hm))
+    assert rule["noise_std"] > -rule["difference"] / 3 and not rule["named"]
+    # Without the model or a vertical test at two levels: no rule.
+    rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)
+    assert softening_rule(resonance_shift(rows)) is None
+    assert softening_rule(resonance_shift(rows.take(rows.level == 0.3), Hm)) is None
+
+    resonance = resonance_shift(rows, Hm)
+
+    def report(verdict, best=None):
+        return {"verdict": verdict, "best_effect": best, "best_candidate": best,
+                "explanation": "the model-form gap dominates", "evidence": {
+                    "resonance": resonance},
+                "ranking": [{"effect": "softening", "gap_reduction_heldout": 0.02}],
+                "structural": {"ranking": [{"effect": "softening", "effect_share": 0.01}]}}
+
+    r = report("structural")
+    apply_softening_rule(r, ["arms", "softening"])
+    assert (r["verdict"], r["best_effect"]) == ("explained", "softening")
+    assert r["explanation"].startswith("level rule") and "1% of the held-out gap" in \
+        r["explanation"]
+    assert "softening named" in "\n".join(_resonance_lines(resonance, r["level_rule"]))
+    for verdict, best, names in (("explained", "arms", ["arms", "softening"]),
+                                 ("structural", None, ["arms"])):
+        r = report(verdict, best)
+        apply_softening_rule(r, names)
+        assert (r["verdict"], r["best_effect"]) == (verdict, best)
+        assert r["level_rule"]["named"]

@@ -207,7 +207,7 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
         named = b >= EXPLAINED_BEYOND
         ranking = [{"effect": "arms", "delta_bic": -5.0, "reduction_beyond": b},
                    {"effect": "softening", "delta_bic": 40.0, "reduction_beyond": 0.9}]
-        resonance = {"z": {"data_per_doubling": 0.85 + 0.01 * i, "model_per_doubling": 0.9}}
+        resonance = {"z": {"data_per_doubling": 0.855 + 0.01 * i, "model_per_doubling": 0.9}}
         (t / "diagnosis" / "report.json").write_text(json.dumps({
             "verdict": "explained" if named else "structural",
             "best_effect": "arms" if named else None, "ranking": [],
@@ -228,16 +228,25 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     with pytest.raises(SystemExit, match="bad.json: not a file of subject values"):
         bench.gather([tmp_path / "bad.json"])
     s = bench.summary(data["lumped"], alpha=0.10)
-    assert s["subjects"] == 10 and s["named"] == 2 and s["named_effects"] == ["arms"]
+    # Named: two by the structural rule (0.30, 0.19), one by the level rule (below).
+    assert s["subjects"] == 10 and s["named"] == 3
+    assert s["named_effects"] == ["arms", "softening"]
     assert s["statistic_quantiles"][1.0] == 0.30  # softening's 0.9 has a positive delta BIC
     # One subject in ten may be named: the threshold sits just above the second largest.
     assert 0.19 < s["threshold_at_alpha"] < 0.20
     assert sum(x >= s["threshold_at_alpha"] for x in beyond) == 1
-    assert 0.5 < s["rate_upper_95"] < 0.6  # Clopper-Pearson, 2 of 10
-    # Resonance shifts data - model: -0.05 ... +0.04; 90% of ten: cut none
+    assert 0.6 < s["rate_upper_95"] < 0.7  # Clopper-Pearson, 3 of 10
+    # Resonance shifts data - model: -0.045 ... +0.045; 90% of ten: cut none
     # (floor(0.05 * 10) = 0) on either side, so the band is the full range.
     r = s["resonance"]["z"]
-    assert r["subjects"] == 10 and r["median"] == pytest.approx(-0.005)
-    assert r["band_at_alpha"] == pytest.approx([-0.05, 0.04])
+    assert r["subjects"] == 10 and r["median"] == pytest.approx(0.0, abs=1e-12)
+    assert r["band_at_alpha"] == pytest.approx([-0.045, 0.045])
     assert bench.resonance_band(data["lumped"], alpha=0.4)["z"]["band_at_alpha"] == \
-        pytest.approx([-0.03, 0.02])
+        pytest.approx([-0.025, 0.025])
+    # The level rule (shift below -0.04) names the first subject (-0.045) alone;
+    # the structural rule had not named it (0.02).
+    assert s["level_rule_named"] == 1
+    # A report that carries the rule's own reading is taken as it says.
+    quiet = dict(data["lumped"][0], level_rule_named=False)
+    assert bench.named_effect(quiet) is None and bench.named_effect(data["lumped"][0]) == \
+        "softening"

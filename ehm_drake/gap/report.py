@@ -179,7 +179,7 @@ def markdown(rep: dict, figures: list[str]) -> str:
                          f"{e['coherence_deficit']:.3f}")
         lines.append("")
     if ev.get("resonance"):
-        lines += _resonance_lines(ev["resonance"])
+        lines += _resonance_lines(ev["resonance"], rep.get("level_rule"))
     sig = [c for c in rep["localization"] if c["significant"]]
     lines += [f"## Where the gap lies ({len(sig)} significant cells of "
               f"{len(rep['localization'])})", "",
@@ -368,10 +368,11 @@ def _contrast_lines(con: dict | None) -> list[str]:
     return lines
 
 
-def _resonance_lines(resonance: dict) -> list[str]:
+def _resonance_lines(resonance: dict, rule: dict | None = None) -> list[str]:
     """The report's "Resonance against level" section: each direction's
     resonance frequency at its two levels, in the data and the refitted
-    model, and the factor per doubling of the level."""
+    model, the factor per doubling of the level, and the single-subject
+    level rule's reading of it (`resonance.softening_rule`)."""
     def moves(factor):
         return "rises" if factor > 1 else "falls"
 
@@ -395,7 +396,14 @@ def _resonance_lines(resonance: dict) -> list[str]:
             lines.append(f"- {d} ({e['levels'][0]:g} → {e['levels'][1]:g} m/s²): the data's "
                          f"resonance {moves(fd)} ×{fd:.3f} per doubling of the level (median "
                          f"of the segments), the refitted model's {moves(fm)} ×{fm:.3f}: the "
-                         f"subject softens {e['compared']} the model with level.")
+                         f"subject softens {e['compared']} the model with level "
+                         f"(measurement noise of the data's factor: "
+                         f"{e.get('data_per_doubling_std', float('nan')):.3f}).")
+    if rule:
+        lines.append(f"- Level rule: the vertical difference {rule['difference']:+.3f} per "
+                     f"doubling against {rule['threshold']:+.3g} and {rule['sigmas']:g} noise "
+                     f"standard deviations: softening "
+                     f"{'named' if rule['named'] else 'not named'}.")
     lines += ["- For comparison, seated people's vertical resonance: about ×0.87 per doubling "
               "from 0.25 to 2 m/s² r.m.s. (Fairley & Griffin 1989, "
               "doi:10.1016/0021-9290(89)90031-6).", ""]

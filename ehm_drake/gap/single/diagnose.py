@@ -48,6 +48,9 @@ Procedure (`diagnose`):
    FRF at two levels differing beyond their uncertainty) and coherence
    that does not rise with level (linear + sensor noise would give
    SNR-scaled coherence), both pointing at nonlinear candidates.
+7. The level rule (`resonance.softening_rule`): when nothing else is named,
+   a vertical resonance that falls clearly more per doubling of the level
+   than the refitted model's names `softening` (`explained`).
 """
 
 from __future__ import annotations
@@ -102,7 +105,7 @@ from .localize import (
     mark_after,
     rows_from_frf,
 )
-from .resonance import resonance_shift
+from .resonance import apply_softening_rule, resonance_shift
 from .verdict import AMBIGUITY_MARGIN, EXPLAINED_REDUCTION, decide, explain
 
 SEPARATION_OFFSET_MM = 4.0
@@ -583,6 +586,7 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
         sp = structural_pass(state, results, names, workers, progress)
         apply_to_report(report, sp, rows)
         t_fit = time.perf_counter() - t1
+    apply_softening_rule(report, names)
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
                           "total": time.perf_counter() - t_start, "workers": nwork}
     return Diagnosis(report, rows, results, base_names, cells_before, cells_after)
