@@ -19,10 +19,12 @@ and prints, per reality, the subjects named under the shipped rule (with a
 Clopper-Pearson 95% upper bound of the rate), the statistic's quantiles,
 the smallest threshold under which at most `alpha` of the subjects are
 named, per direction the band of the reports' resonance shift against the
-model (data - model factor per doubling of the level) that holds all but
-`alpha` of the subjects, and how many the level rule names
-(`resonance.softening_rule`; for reports made before it, from their shift
-alone, without its noise guard: an upper bound).  A subject counts as named
+model (data - model factor per doubling of the level: the peaks', and the
+frequency scale of the whole resonance region) that holds all but `alpha`
+of the subjects, and how many the level rule names
+(`resonance.softening_rule`; for reports made before it, from the frequency
+scale computed again from the trial's data, without the rule's noise guard:
+an upper bound).  A subject counts as named
 when either rule names it.  `--out` writes the per-subject values; such
 a file given in place of a run adds its subjects (a subject met twice, the
 same reality, blind seed and trial, counts once), so a calibration can grow
@@ -40,6 +42,28 @@ import numpy as np
 from scipy.stats import beta
 
 
+def recomputed_resonance(data: Path) -> dict:
+    """The report's "resonance" evidence computed again from a trial's data
+    (the base refit without candidates, then `resonance_shift`): for reports
+    made before the frequency scale was part of it."""
+    from ehm_drake.gap.library.models import Candidate, Predictor, Statics, fit_candidate
+    from ehm_drake.gap.single import diagnose as dg
+    from ehm_drake.gap.single.resonance import resonance_shift
+    from ehm_drake.identification.parameters import resolve_free
+    from ehm_drake.model.anthropometry import REFERENCE
+    from ehm_drake.params import load_params
+
+    lab = dg.load_lab_data(data)
+    params = load_params()
+    base_names = [f.name for f in resolve_free("default")]
+    fam = dg.load_families(params, REFERENCE, [], base_names, 1, None, True)["base"]
+    pred = Predictor(fam, Candidate(()), lab.rows, lab.tests, base_names,
+                     Statics(fam.family.info, dg.separation_slope(params, REFERENCE)))
+    fit = fit_candidate(pred, np.ones(len(lab.rows), bool))
+    pred.update_statistics(fit.theta)
+    return resonance_shift(lab.rows, pred.predict(fit.theta))
+
+
 def subject_statistic(report: dict) -> dict:
     """One no-effect subject's single-subject report -> its verdict, the
     effect named (or None), the ordinary pass's best held-out reduction,
@@ -49,14 +73,22 @@ def subject_statistic(report: dict) -> dict:
     level than the refitted model's (data - model factor; negative: the
     subject softens more)."""
     st = report.get("structural") or {}
-    rule = report.get("level_rule")
     beyond = [e["reduction_beyond"] for e in st.get("ranking", []) if e["delta_bic"] < 0]
     ranking = report.get("ranking") or []
     resonance = (report.get("evidence") or {}).get("resonance") or {}
+    # (A rule read from the resonance peaks, before the frequency scale, is not this rule.)
+    rule = report.get("level_rule") if "scale" in json.dumps(resonance) else None
     return {"verdict": report["verdict"], "named": report.get("best_effect"),
             "resonance_difference": {d: e["data_per_doubling"] - e["model_per_doubling"]
                                      for d, e in resonance.items()
                                      if "model_per_doubling" in e},
+            "scale_difference": {d: e["scale"]["data_per_doubling"]
+                                 - e["scale"]["model_per_doubling"]
+                                 for d, e in resonance.items()
+                                 if (e.get("scale") or {}).get("model_per_doubling") is not None
+                                 and e["scale"]["data_per_doubling"] is not None},
+            "scale_std": {d: e["scale"]["data_std"] for d, e in resonance.items()
+                          if "data_std" in (e.get("scale") or {})},
             "ordinary_best_reduction": ranking[0]["gap_reduction_heldout"] if ranking else None,
             "structural_ran": bool(st.get("ran")),
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
@@ -73,7 +105,7 @@ def level_rule_names(subject: dict) -> bool:
 
     if "level_rule_named" in subject:
         return subject["level_rule_named"]
-    return subject.get("resonance_difference", {}).get("z", 0.0) < -SOFTENING_SHIFT
+    return subject.get("scale_difference", {}).get("z", 0.0) < -SOFTENING_SHIFT
 
 
 def named_effect(subject: dict) -> str | None:
@@ -102,7 +134,10 @@ def collect(runs) -> dict:
             rep_path = rf.parent / "diagnosis" / "report.json"
             if "skipped" in r or r.get("hidden") or not rep_path.exists():
                 continue
-            s = subject_statistic(json.loads(rep_path.read_text()))
+            report = json.loads(rep_path.read_text())
+            if not any("scale" in e for e in report["evidence"]["resonance"].values()):
+                report["evidence"]["resonance"] = recomputed_resonance(rf.parent / "data")
+            s = subject_statistic(report)
             s["trial"] = rf.parent.name
             s["seed"] = seed
             out.setdefault(reality, []).append(s)
@@ -148,16 +183,16 @@ def threshold_for(statistics, alpha: float) -> float:
     return float(s[allowed]) + 1e-9 if allowed < len(s) else 0.0
 
 
-def resonance_band(subjects: list, alpha: float) -> dict:
+def resonance_band(subjects: list, alpha: float, key: str = "resonance_difference") -> dict:
     """Per direction: the no-effect subjects' resonance differences (data -
-    model factor per doubling), their median, and the band holding all but
-    alpha of them (alpha / 2 cut from each side, nearest order statistics):
-    a rule naming softening below it, or stiffening above, names at most
-    alpha of such subjects."""
+    model factor per doubling; `key` "resonance_difference": of the peaks,
+    "scale_difference": of the frequency scale), their median, and the band
+    holding all but alpha of them (alpha / 2 cut from each side, nearest
+    order statistics): a rule naming softening below it, or stiffening
+    above, names at most alpha of such subjects."""
     out = {}
     for d in "xyz":
-        v = np.sort([s["resonance_difference"][d] for s in subjects
-                     if d in s.get("resonance_difference", {})])
+        v = np.sort([s[key][d] for s in subjects if d in s.get(key, {})])
         if not len(v):
             continue
         cut = int(np.floor(alpha / 2 * len(v)))
@@ -177,7 +212,8 @@ def summary(subjects: list, alpha: float) -> dict:
             "structural_ran": sum(s["structural_ran"] for s in subjects),
             "statistic_quantiles": {q: float(np.quantile(stat, q)) for q in (0.5, 0.9, 1.0)},
             "threshold_at_alpha": threshold_for(stat, alpha),
-            "resonance": resonance_band(subjects, alpha)}
+            "resonance": resonance_band(subjects, alpha),
+            "scale": resonance_band(subjects, alpha, "scale_difference")}
 
 
 def main(argv=None) -> None:
@@ -202,11 +238,12 @@ def main(argv=None) -> None:
               f"{s['structural_ran']}; statistic median {q[0.5]:.3f}, 90% {q[0.9]:.3f}, "
               f"max {q[1.0]:.3f}; threshold for <= {100 * a.alpha:.0f}%: "
               f"{s['threshold_at_alpha']:.3f}; level rule names {s['level_rule_named']}")
-        for d, r in s["resonance"].items():
-            lo, hi = r["band_at_alpha"]
-            print(f"  {d}: resonance factor per doubling, data - model, over {r['subjects']} "
-                  f"subjects: median {r['median']:+.3f}, {100 * (1 - a.alpha):.0f}% of them "
-                  f"in [{lo:+.3f}, {hi:+.3f}]")
+        for what, key in (("resonance peak", "resonance"), ("frequency scale", "scale")):
+            for d, r in s[key].items():
+                lo, hi = r["band_at_alpha"]
+                print(f"  {d}: {what} per doubling, data - model, over {r['subjects']} "
+                      f"subjects: median {r['median']:+.3f}, {100 * (1 - a.alpha):.0f}% of them "
+                      f"in [{lo:+.3f}, {hi:+.3f}]")
     if a.out:
         Path(a.out).write_text(json.dumps(data, indent=1) + "\n")
 

@@ -469,35 +469,55 @@ def test_resonance_shift_compares_the_subjects_softening_with_the_models():
     assert e["data_per_doubling"] == pytest.approx(0.8, abs=0.005)
 
 
-def test_shift_noise_is_the_scatter_that_measurement_noise_gives_the_shift():
-    """The data's per-doubling factor, measured again and again with 1% noise
-    per component (coherence and averages stating that error), scatters as
-    much as `shift_noise` predicts from one measurement; stated noise ten
-    times larger gives a standard deviation several times larger (less than
-    ten: the smoothing over bins averages part of it away)."""
+def test_frequency_scale_maps_one_level_onto_the_other():
+    """Resonances 5 -> 4 Hz from 0.3 to 0.6 m/s^2 in every segment: the
+    whole resonance region scales x0.8, with 1% noise per bin; a segment
+    whose gain also drops 20% does not change it (the gain is profiled
+    out); shifts beyond the searched range give NaN, not an edge value."""
+    from ehm_drake.gap.single.resonance import _curves, frequency_scale, resonance_shift
+
+    rng = np.random.default_rng(3)
+    rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)
+    e = resonance_shift(rows, Hm)["z"]["scale"]
+    assert e["data_per_doubling"] == pytest.approx(0.8, abs=0.005)
+    assert e["model_per_doubling"] == pytest.approx(0.92, abs=0.005)
+    segs = ["pelvis", "trunk", "head"]
+    lo, hi = _curves(rows, "z", 0.3, segs), _curves(rows, "z", 0.6, segs)
+    quieter = [(lf, la - 0.2, va, vm) for lf, la, va, vm in hi]
+    assert frequency_scale(lo, quieter, (2.0, 10.0), 1.0) == pytest.approx(
+        frequency_scale(lo, hi, (2.0, 10.0), 1.0), abs=1e-9)
+    rows, _ = _level_rows((5.0, 2.5), (5.0, 4.6))
+    assert resonance_shift(rows)["z"]["scale"]["data_per_doubling"] is None
+
+
+def test_shift_noise_is_the_scatter_that_measurement_noise_gives_the_scale():
+    """The data's frequency scale per doubling, measured again and again with
+    1% noise per component (coherence and averages stating that error),
+    scatters as much as `shift_noise` predicts from one measurement; stated
+    noise ten times larger gives a standard deviation several times larger."""
     from ehm_drake.gap.single.resonance import resonance_shift, shift_noise
 
     rng = np.random.default_rng(11)
     factors, predicted = [], []
-    for _ in range(40):
+    for _ in range(30):
         rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)
         # (1 - g2) / (2 n g2) = 1e-4 per component, n = 20 averages.
         rows.coherence[:] = 1.0 / (1.0 + 40e-4)
         rows.n_averages[:] = 20.0
-        e = resonance_shift(rows, Hm)["z"]
+        e = resonance_shift(rows, Hm)["z"]["scale"]
         factors.append(e["data_per_doubling"])
-        predicted.append(e["data_per_doubling_std"])
+        predicted.append(e["data_std"])
     scatter = np.std(factors)
     assert 0.6 < np.median(predicted) / scatter < 1.6, (np.median(predicted), scatter)
     rows.coherence[:] = 1.0 / (1.0 + 40e-2)
     noisier = shift_noise(rows, "z", 0.3, 0.6, ["pelvis", "trunk", "head"])
-    assert 3.0 < noisier / np.median(predicted) < 12.0
+    assert 5.0 < noisier / np.median(predicted) < 25.0, (noisier, np.median(predicted))
 
 
 def test_level_rule_names_softening_beyond_the_models_own():
     """One subject at two levels: the level rule names softening when the
     vertical resonance falls clearly more than the refitted model's (x0.80
-    against x0.92), not when it falls as much (x0.80 against x0.82) or less,
+    against x0.92), not when it falls as much (x0.80 against x0.81) or less,
     not when the noise stated by the data could make the difference, and not
     over an effect already named; the report says so."""
     from ehm_drake.gap.report import _resonance_lines
@@ -509,11 +529,11 @@ def test_level_rule_names_softening_beyond_the_models_own():
     )
 
     rng = np.random.default_rng(5)
-    for fn_model, named in (((5.0, 4.6), True), ((5.0, 4.1), False), ((5.0, 3.5), False)):
+    for fn_model, named in (((5.0, 4.6), True), ((5.0, 4.05), False), ((5.0, 3.8), False)):
         rows, Hm = _level_rows((5.0, 4.0), fn_model, rng=rng)
         rule = softening_rule(resonance_shift(rows, Hm))
         assert rule["named"] is named, (fn_model, rule)
-        assert rule["difference"] == pytest.approx(0.8 - fn_model[1] / fn_model[0], abs=0.015)
+        assert rule["difference"] == pytest.approx(0.8 - fn_model[1] / fn_model[0], abs=0.005)
         assert rule["threshold"] == -SOFTENING_SHIFT
     # The same shift with data whose stated error is 30% per component: not named.
     rows, Hm = _level_rows((5.0, 4.0), (5.0, 4.6), rng=rng)

@@ -396,13 +396,19 @@ def _resonance_lines(resonance: dict, rule: dict | None = None) -> list[str]:
             lines.append(f"- {d} ({e['levels'][0]:g} → {e['levels'][1]:g} m/s²): the data's "
                          f"resonance {moves(fd)} ×{fd:.3f} per doubling of the level (median "
                          f"of the segments), the refitted model's {moves(fm)} ×{fm:.3f}: the "
-                         f"subject softens {e['compared']} the model with level "
-                         f"(measurement noise of the data's factor: "
-                         f"{e.get('data_per_doubling_std', float('nan')):.3f}).")
+                         f"subject softens {e['compared']} the model with level.")
+        sc = e.get("scale") or {}
+        if sc.get("data_per_doubling") is not None:
+            model = (f", the refitted model's ×{sc['model_per_doubling']:.3f}"
+                     if sc.get("model_per_doubling") is not None else "")
+            lines.append(f"  The whole resonance region ({sc['band_hz'][0]:g}-"
+                         f"{sc['band_hz'][1]:g} Hz, every segment) scales "
+                         f"×{sc['data_per_doubling']:.3f} per doubling (± "
+                         f"{sc['data_std']:.3f} from the measurement noise){model}.")
     if rule:
-        lines.append(f"- Level rule: the vertical difference {rule['difference']:+.3f} per "
-                     f"doubling against {rule['threshold']:+.3g} and {rule['sigmas']:g} noise "
-                     f"standard deviations: softening "
+        lines.append(f"- Level rule: the vertical scale's difference {rule['difference']:+.3f} "
+                     f"per doubling against {rule['threshold']:+.3g} and {rule['sigmas']:g} "
+                     f"noise standard deviations: softening "
                      f"{'named' if rule['named'] else 'not named'}.")
     lines += ["- For comparison, seated people's vertical resonance: about ×0.87 per doubling "
               "from 0.25 to 2 m/s² r.m.s. (Fairley & Griffin 1989, "

@@ -11,11 +11,14 @@ subject softens more, less or as much as the refitted model
 One subject alone has no reference group to tell an effect from the body's
 own difference from the model, but its two levels do: a structural error
 of the model is the same at both, a level-dependent effect is not.  The
-level rule (`softening_rule`) names `softening` when the subject's vertical
-resonance falls clearly more per doubling of the level than the refitted
-model's: by more than `SOFTENING_SHIFT` and by more than
-`SOFTENING_SIGMAS` standard deviations of the data's own measurement noise
-(`shift_noise`).
+peak of a measured gain is a noisy measure of a resonance (a few bins carry
+it); the level rule uses the whole resonance region instead: the frequency
+scale that maps the low level's gains onto the high level's
+(`frequency_scale`, all segments together, each bin weighted by its
+uncertainty).  It names `softening` (`softening_rule`) when the subject's
+vertical scale per doubling of the level falls short of the refitted
+model's by more than `SOFTENING_SHIFT` and by more than `SOFTENING_SIGMAS`
+standard deviations of the data's own measurement noise (`shift_noise`).
 """
 
 from __future__ import annotations
@@ -39,15 +42,22 @@ RESONANCE_SMOOTHING_BINS = 5
 #: measurement noise (0.007 on records with 1% noise per bin and damping
 #: 0.3, `tests/test_gap.py`).
 RESONANCE_TOLERANCE = 0.02
-#: The level rule's threshold on (data - model) per doubling of the level,
-#: vertical excitation.  Calibrated on no-effect subjects of two independent
-#: realities diagnosed alone at 0.3 and 0.6 m/s^2 (bench/single_subject_null.py;
-#: the subjects and their values in docs/history/data/single_subject_null.json):
-#: it lies below every one of them so far (lowest -0.025, on `lumped`), while
-#: the softening subjects of both realities met so far shifted by about
-#: -0.056.  For scale: people's whole softening is about -0.13 per doubling
-#: (x0.87; Fairley & Griffin 1989), the model's own most of that.
-SOFTENING_SHIFT = 0.04
+#: The frequency-scale registration: its band per excited direction (Hz;
+#: the vertical whole-body resonance near 4-6 Hz and its flanks, the
+#: fore-and-aft and lateral modes near 1-4 Hz), narrowed where a scale
+#: would reach outside the measured 0.1-12 Hz, and the scales searched per
+#: doubling of the level (beyond them the result is not reported).
+SCALE_BAND_HZ = {"x": (0.7, 8.0), "y": (0.7, 8.0), "z": (2.0, 10.0)}
+SCALE_PER_DOUBLING = (0.7, 1.3)
+#: The level rule's threshold on (data - model) vertical scale per doubling.
+#: Calibrated on no-effect subjects of two independent realities diagnosed
+#: alone at 0.3 and 0.6 m/s^2 (bench/single_subject_null.py; the subjects and
+#: their values in docs/history/data/single_subject_null.json): below every
+#: one of them so far (lowest +0.005), and about four standard deviations of
+#: the measurement noise of a 120 s test below the nearest.  For scale:
+#: people's whole softening is about -0.13 per doubling (x0.87; Fairley &
+#: Griffin 1989), the model's own most of that.
+SOFTENING_SHIFT = 0.015
 #: ... and the shift must exceed this many standard deviations of what the
 #: data's measurement noise alone moves it by.
 SOFTENING_SIGMAS = 3.0
@@ -78,14 +88,83 @@ def peak_frequency(freq: np.ndarray, gain: np.ndarray,
     return float(f[k])
 
 
+def _curves(rows: Rows, direction: str, level: float, segments, H=None) -> list:
+    """Per segment (the direction's own translation), sorted by frequency:
+    (log f, log |H|, relative variance with the model floor, relative
+    variance of the measurement alone) of one test; H defaults to the
+    measured rows (else a prediction of every row)."""
+    from .localize import relative_variance
+
+    H = rows.H if H is None else H
+    out = []
+    for seg in segments:
+        m = rows.test_mask(direction, level) & (
+            rows.channel == CHANNEL_NAMES.index(f"{seg}_{direction}"))
+        o = np.argsort(rows.freq[m])
+        out.append((np.log(rows.freq[m][o]), np.log(np.maximum(np.abs(H[m][o]), 1e-300)),
+                    rows.rel_var[m][o],
+                    relative_variance(rows.coherence[m][o], rows.n_averages[m][o], 0.0)))
+    return out
+
+
+def frequency_scale(lo: list, hi: list, band, doublings: float) -> float:
+    """The frequency scale s that maps the low level's gains onto the high
+    level's, |H_hi(f sqrt(s))| ~ g |H_lo(f / sqrt(s))| over `band` (both
+    gains interpolated half way, so neither reaches far outside its
+    frequencies; a gain g per segment, profiled out; every segment's bins
+    together, each weighted by the inverse of the two gains' relative
+    variances): s < 1, the resonance region moves down as the level grows.
+    `lo`, `hi`: `_curves` of the two tests.  Searched over
+    `SCALE_PER_DOUBLING` ** doublings, the band narrowed so that every
+    interpolation stays inside the measured frequencies; NaN when the best
+    scale lies on that range's edge or no bin is left."""
+    s_lo, s_hi = (b ** doublings for b in SCALE_PER_DOUBLING)
+    f_min = max(math.exp(c[0][0]) for c in (*lo, *hi))
+    f_max = min(math.exp(c[0][-1]) for c in (*lo, *hi))
+    band = (max(band[0], f_min * math.sqrt(s_hi)), min(band[1], f_max * math.sqrt(s_lo)))
+    picks = []
+    for (lf, la, va, _), (lf2, lb, vb, _) in zip(lo, hi, strict=True):
+        u = lf2[(lf2 >= math.log(band[0])) & (lf2 <= math.log(band[1]))]
+        if len(u) >= 3:
+            picks.append((u, lf, la, va, lf2, lb, vb))
+    if not picks:
+        return math.nan
+
+    def cost(log_s):
+        total = np.zeros(len(log_s))
+        half = 0.5 * log_s[:, None]
+        for u, lf, la, va, lf2, lb, vb in picks:
+            x_lo, x_hi = u[None, :] - half, u[None, :] + half
+            w = 1.0 / (np.interp(x_lo, lf, va) + np.interp(x_hi, lf2, vb))
+            r = np.interp(x_hi, lf2, lb) - np.interp(x_lo, lf, la)
+            c = (w * r).sum(1) / w.sum(1)
+            total += (w * (r - c[:, None]) ** 2).sum(1)
+        return total
+
+    coarse = np.linspace(math.log(s_lo), math.log(s_hi), 81)
+    k = int(np.argmin(cost(coarse)))
+    if k in (0, len(coarse) - 1):
+        return math.nan
+    fine = np.linspace(coarse[k - 1], coarse[k + 1], 41)
+    c = cost(fine)
+    j = int(np.clip(np.argmin(c), 1, len(fine) - 2))
+    a, b, d = c[j - 1], c[j], c[j + 1]
+    den = a - 2 * b + d
+    step = 0.5 * (a - d) / den if den > 0 else 0.0
+    return float(math.exp(fine[j] + step * (fine[1] - fine[0])))
+
+
 def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
-    """Per direction tested at two or more levels: the frequency of each
-    measured segment's resonance (`RESONANCE_SEGMENTS`, the direction's own
-    translation) at the lowest and the highest level, in the data and, given
-    `H_model` (a prediction of every row), in the model; the ratio high /
-    low and its factor per doubling of the level (people's vertical
-    resonance: about x0.87 per doubling from 0.25 to 2 m/s^2 r.m.s., Fairley
-    & Griffin 1989, doi:10.1016/0021-9290(89)90031-6)."""
+    """Per direction tested at two or more levels, at the lowest and the
+    highest level: the frequency of each measured segment's resonance
+    (`RESONANCE_SEGMENTS`, the direction's own translation), in the data
+    and, given `H_model` (a prediction of every row), in the model, with the
+    ratio high / low and its factor per doubling of the level; the median
+    factor over the segments; the frequency scale of the whole resonance
+    region per doubling (`frequency_scale`, key `scale`) with the standard
+    deviation the data's measurement noise gives it (`shift_noise`).
+    People's vertical resonance: about x0.87 per doubling from 0.25 to
+    2 m/s^2 r.m.s. (Fairley & Griffin 1989, doi:10.1016/0021-9290(89)90031-6)."""
     out = {}
     for d in "xyz":
         levels = sorted({lv for dd, lv in rows.tests if dd == d and np.isfinite(lv)})
@@ -110,10 +189,18 @@ def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
                 entry["segments"][seg] = seg_entry
         if not entry["segments"]:
             continue
+        segs = list(entry["segments"])
         for name in sources:
             entry[f"{name}_per_doubling"] = float(np.median(
                 [e[name]["per_doubling"] for e in entry["segments"].values()]))
-        entry["data_per_doubling_std"] = shift_noise(rows, d, lo, hi, list(entry["segments"]))
+        scale = {"band_hz": list(SCALE_BAND_HZ[d])}
+        for name, H in sources.items():
+            s = frequency_scale(_curves(rows, d, lo, segs, H), _curves(rows, d, hi, segs, H),
+                                SCALE_BAND_HZ[d], doublings)
+            scale[f"{name}_per_doubling"] = s ** (1.0 / doublings) if np.isfinite(s) else None
+        if scale["data_per_doubling"] is not None:
+            scale["data_std"] = shift_noise(rows, d, lo, hi, segs)
+        entry["scale"] = scale
         if H_model is not None:
             diff = entry["data_per_doubling"] - entry["model_per_doubling"]
             entry["compared"] = ("as much as" if not abs(diff) > RESONANCE_TOLERANCE
@@ -124,51 +211,43 @@ def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
 
 def shift_noise(rows: Rows, direction: str, lo: float, hi: float, segments,
                 draws: int = NOISE_DRAWS, seed: int = 0) -> float:
-    """The standard deviation of the data's per-doubling factor (median over
-    `segments`) from measurement noise alone: the rows redrawn `draws` times
-    with their H1 error (complex Gaussian, variance per component from the
-    coherence and the number of averages, no model floor) and the peaks
-    found again."""
-    from .localize import relative_variance
-
+    """The standard deviation of the data's frequency scale per doubling
+    (`frequency_scale`) from measurement noise alone: the rows redrawn
+    `draws` times with their H1 error (complex Gaussian, variance per
+    component from the coherence and the number of averages, no model
+    floor) and the scale found again."""
     doublings = math.log2(hi / lo)
     rng = np.random.default_rng(seed)
-    picks = []
-    for seg in segments:
-        ch = CHANNEL_NAMES.index(f"{seg}_{direction}")
-        pair = []
-        for lv in (lo, hi):
-            m = rows.test_mask(direction, lv) & (rows.channel == ch)
-            sd = np.sqrt(relative_variance(rows.coherence[m], rows.n_averages[m], 0.0)
-                         ) * np.abs(rows.H[m])
-            pair.append((rows.freq[m], rows.H[m], sd))
-        picks.append(pair)
-    factors = np.empty(draws)
-    for k in range(draws):
-        per_segment = []
-        for pair in picks:
-            pk = [peak_frequency(f, H + sd * (rng.standard_normal(len(H))
-                                              + 1j * rng.standard_normal(len(H))))
-                  for f, H, sd in pair]
-            per_segment.append((pk[1] / pk[0]) ** (1.0 / doublings))
-        factors[k] = np.median(per_segment)
-    return float(np.std(factors))
+    tests = []
+    for lv in (lo, hi):
+        curves = _curves(rows, direction, lv, segments)
+        tests.append([(lf, np.exp(la), va, vm) for lf, la, va, vm in curves])
+    factors = []
+    for _ in range(draws):
+        noisy = [[(lf, np.log(np.abs(g * (1 + np.sqrt(vm) * (
+            rng.standard_normal(len(g)) + 1j * rng.standard_normal(len(g)))))), va, vm)
+                  for lf, g, va, vm in curves] for curves in tests]
+        s = frequency_scale(noisy[0], noisy[1], SCALE_BAND_HZ[direction], doublings)
+        if np.isfinite(s):
+            factors.append(s ** (1.0 / doublings))
+    return float(np.std(factors)) if len(factors) > 1 else math.nan
 
 
 def softening_rule(resonance: dict) -> dict | None:
     """The single-subject level rule on a `resonance_shift` result (with the
-    model's prediction): `named` when the vertical resonance falls more per
-    doubling than the model's by more than `SOFTENING_SHIFT` and by more than
-    `SOFTENING_SIGMAS` of its noise; None without a vertical test at two
-    levels."""
+    model's prediction): `named` when the vertical frequency scale per
+    doubling falls short of the model's by more than `SOFTENING_SHIFT` and by
+    more than `SOFTENING_SIGMAS` of its noise; None without a vertical test
+    at two levels or a scale found in both."""
     e = resonance.get("z")
-    if not e or "model_per_doubling" not in e:
+    sc = (e or {}).get("scale") or {}
+    if sc.get("data_per_doubling") is None or sc.get("model_per_doubling") is None:
         return None
-    diff = e["data_per_doubling"] - e["model_per_doubling"]
-    sd = e.get("data_per_doubling_std", 0.0)
+    diff = sc["data_per_doubling"] - sc["model_per_doubling"]
+    sd = sc.get("data_std", math.nan)
     return {"effect": "softening", "direction": "z", "levels": e["levels"],
-            "data_per_doubling": e["data_per_doubling"],
-            "model_per_doubling": e["model_per_doubling"], "difference": diff,
+            "data_per_doubling": sc["data_per_doubling"],
+            "model_per_doubling": sc["model_per_doubling"], "difference": diff,
             "noise_std": sd, "threshold": -SOFTENING_SHIFT, "sigmas": SOFTENING_SIGMAS,
             "named": bool(diff < -SOFTENING_SHIFT and diff < -SOFTENING_SIGMAS * sd)}
 
@@ -193,8 +272,8 @@ def apply_softening_rule(report: dict, names) -> None:
     report["verdict"] = "explained"
     report["best_effect"] = report["best_candidate"] = "softening"
     report["explanation"] = (
-        f"level rule: the vertical resonance falls x{rule['data_per_doubling']:.3f} per "
-        f"doubling of the level, the refitted model's x{rule['model_per_doubling']:.3f}: "
+        f"level rule: the vertical resonance region scales x{rule['data_per_doubling']:.3f} "
+        f"per doubling of the level, the refitted model's x{rule['model_per_doubling']:.3f}: "
         f"the subject softens more than the model by {-rule['difference']:.3f} per doubling "
         f"(rule: beyond {SOFTENING_SHIFT:g} and {SOFTENING_SIGMAS:g} standard deviations of "
         f"the measurement noise, {rule['noise_std']:.3f}); the softening candidate's own "
