@@ -207,7 +207,7 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
         named = b >= EXPLAINED_BEYOND
         ranking = [{"effect": "arms", "delta_bic": -5.0, "reduction_beyond": b},
                    {"effect": "softening", "delta_bic": 40.0, "reduction_beyond": 0.9}]
-        scale = {"band_hz": [2.0, 10.0], "data_per_doubling": 0.8825 + 0.005 * i,
+        scale = {"band_hz": [2.0, 10.0], "data_per_doubling": 0.8875 + 0.005 * i,
                  "model_per_doubling": 0.9, "data_std": 0.002}
         resonance = {"z": {"data_per_doubling": 0.855 + 0.01 * i, "model_per_doubling": 0.9,
                            "scale": scale}}
@@ -246,10 +246,10 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     assert r["band_at_alpha"] == pytest.approx([-0.045, 0.045])
     assert bench.resonance_band(data["lumped"], alpha=0.4)["z"]["band_at_alpha"] == \
         pytest.approx([-0.025, 0.025])
-    # The level rule (frequency scale below -0.015) names the first subject
-    # (-0.0175) alone; the structural rule had not named it (0.02).
+    # The level rule (frequency scale below -0.01) names the first subject
+    # (-0.0125) alone; the structural rule had not named it (0.02).
     assert s["level_rule_named"] == 1
-    assert s["scale"]["z"]["band_at_alpha"] == pytest.approx([-0.0175, 0.0275])
+    assert s["scale"]["z"]["band_at_alpha"] == pytest.approx([-0.0125, 0.0325])
     # A report that carries the rule's own reading is taken as it says.
     quiet = dict(data["lumped"][0], level_rule_named=False)
     assert bench.named_effect(quiet) is None and bench.named_effect(data["lumped"][0]) == \
