@@ -403,8 +403,9 @@ def _resonance_lines(resonance: dict, rule: dict | None = None) -> list[str]:
                      if sc.get("model_per_doubling") is not None else "")
             lines.append(f"  The whole resonance region ({sc['band_hz'][0]:g}-"
                          f"{sc['band_hz'][1]:g} Hz, every segment) scales "
-                         f"×{sc['data_per_doubling']:.3f} per doubling (± "
-                         f"{sc['data_std']:.3f} from the measurement noise){model}.")
+                         f"×{sc['data_per_doubling']:.3f} per doubling"
+                         + (f" (± {sc['data_std']:.3f} from the measurement noise)"
+                            if sc.get("data_std") is not None else "") + f"{model}.")
     if rule:
         lines.append(f"- Level rule: the vertical scale's difference {rule['difference']:+.3f} "
                      f"per doubling against {rule['threshold']:+.3g} and {rule['sigmas']:g} "

@@ -200,7 +200,8 @@ def resonance_shift(rows: Rows, H_model: np.ndarray | None = None) -> dict:
                                 SCALE_BAND_HZ[d], doublings)
             scale[f"{name}_per_doubling"] = s ** (1.0 / doublings) if np.isfinite(s) else None
         if scale["data_per_doubling"] is not None:
-            scale["data_std"] = shift_noise(rows, d, lo, hi, segs)
+            sd = shift_noise(rows, d, lo, hi, segs)
+            scale["data_std"] = sd if np.isfinite(sd) else None
         entry["scale"] = scale
         if H_model is not None:
             diff = entry["data_per_doubling"] - entry["model_per_doubling"]
@@ -238,19 +239,21 @@ def softening_rule(resonance: dict) -> dict | None:
     """The single-subject level rule on a `resonance_shift` result (with the
     model's prediction): `named` when the vertical frequency scale per
     doubling falls short of the model's by more than `SOFTENING_SHIFT` and by
-    more than `SOFTENING_SIGMAS` of its noise; None without a vertical test
-    at two levels or a scale found in both."""
+    more than `SOFTENING_SIGMAS` of its noise (never without a noise
+    estimate); None without a vertical test at two levels or a scale found
+    in both."""
     e = resonance.get("z")
     sc = (e or {}).get("scale") or {}
     if sc.get("data_per_doubling") is None or sc.get("model_per_doubling") is None:
         return None
     diff = sc["data_per_doubling"] - sc["model_per_doubling"]
-    sd = sc.get("data_std", math.nan)
+    sd = sc.get("data_std")
     return {"effect": "softening", "direction": "z", "levels": e["levels"],
             "data_per_doubling": sc["data_per_doubling"],
             "model_per_doubling": sc["model_per_doubling"], "difference": diff,
             "noise_std": sd, "threshold": -SOFTENING_SHIFT, "sigmas": SOFTENING_SIGMAS,
-            "named": bool(diff < -SOFTENING_SHIFT and diff < -SOFTENING_SIGMAS * sd)}
+            "named": bool(sd is not None and diff < -SOFTENING_SHIFT
+                          and diff < -SOFTENING_SIGMAS * sd)}
 
 
 def apply_softening_rule(report: dict, names) -> None:
