@@ -558,9 +558,18 @@ def test_level_rule_names_softening_beyond_the_models_own():
     r = report("structural")
     apply_softening_rule(r, ["arms", "softening"])
     assert (r["verdict"], r["best_effect"]) == ("explained", "softening")
-    assert r["explanation"].startswith("level rule") and "1% of the held-out gap" in \
+    assert r["explanation"].startswith("level rule") and "removes 1% of the held-out gap" in \
         r["explanation"]
     assert "softening named" in "\n".join(_resonance_lines(resonance, r["level_rule"]))
+    # Without a structural pass the ordinary ranking's share is quoted, worse or not,
+    # and what the diagnosis said without the rule is kept.
+    r = report("no_significant_gap")
+    del r["structural"]
+    r["ranking"][0]["gap_reduction_heldout"] = -0.5
+    apply_softening_rule(r, ["softening"])
+    assert r["best_effect"] == "softening" and "does not reduce the held-out gap (it grows " \
+        "by 50%)" in r["explanation"]
+    assert r["explanation"].endswith("Without the rule: the model-form gap dominates")
     for verdict, best, names in (("explained", "arms", ["arms", "softening"]),
                                  ("structural", None, ["arms"])):
         r = report(verdict, best)

@@ -269,10 +269,15 @@ def apply_softening_rule(report: dict, names) -> None:
         return
     st = report.get("structural") or {}
     fitted = next((e for e in st.get("ranking", []) if e["effect"] == "softening"), None)
-    share = (f"{100 * fitted['effect_share']:.0f}% of the held-out gap beyond the "
-             "discrepancy" if fitted else
-             f"{100 * next(e['gap_reduction_heldout'] for e in report['ranking'] if e['effect'] == 'softening'):.0f}% "  # noqa: E501
-             "of the held-out gap")
+    if fitted:
+        share, of = fitted["effect_share"], "the held-out gap beyond the discrepancy"
+    else:
+        share = next(e["gap_reduction_heldout"] for e in report["ranking"]
+                     if e["effect"] == "softening")
+        of = "the held-out gap"
+    fit = (f"removes {100 * share:.0f}% of {of}" if share >= 0 else
+           f"does not reduce {of} (it grows by {-100 * share:.0f}%)")
+    before = report["explanation"]
     report["verdict"] = "explained"
     report["best_effect"] = report["best_candidate"] = "softening"
     report["explanation"] = (
@@ -280,5 +285,6 @@ def apply_softening_rule(report: dict, names) -> None:
         f"per doubling of the level, the refitted model's x{rule['model_per_doubling']:.3f}: "
         f"the subject softens more than the model by {-rule['difference']:.3f} per doubling "
         f"(rule: beyond {SOFTENING_SHIFT:g} and {SOFTENING_SIGMAS:g} standard deviations of "
-        f"the measurement noise, {rule['noise_std']:.3f}); the softening candidate's own "
-        f"fit over every channel removes {share}. " + report["explanation"])
+        f"the measurement noise, {rule['noise_std']:.3f}); the softening candidate's own fit "
+        f"over every channel and band, where the shift weighs little, {fit}. Without the "
+        f"rule: {before}")
