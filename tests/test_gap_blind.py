@@ -235,3 +235,22 @@ def test_the_model_options_are_refused_for_a_reality_s_data(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--reality lumped come from that reality's own simulation" in err
     assert not (tmp_path / "d").exists()
+
+
+def test_an_effect_named_outside_the_ranking_is_scored_first():
+    """The level rule names softening where the ranking put it fourth: the
+    blind score counts it as the diagnosis' first choice (top-1 and top-3),
+    and on a no-effect subject as a false alarm."""
+    from ehm_drake.gap.lab.blind import score
+
+    ranking = [{"effect": e, "gap_reduction_heldout": 0.1 - 0.01 * i}
+               for i, e in enumerate(("visceral_mass", "reflex_delay", "arms", "softening"))]
+    report = {"verdict": "explained", "best_effect": "softening",
+              "gap_before": {"heldout": 1.0}, "ranking": ranking}
+    s = score({"softening": 0.7}, report, detectable=False)
+    assert s["top1"] and s["top3"] and s["ranking_top3"] == [
+        "softening", "visceral_mass", "reflex_delay"]
+    assert score({}, report, reality=True)["false_alarm"]
+    report.update(verdict="no_significant_gap", best_effect=None)
+    s = score({"softening": 0.7}, report, detectable=False)
+    assert not s["top1"] and s["ranking_top3"][0] == "visceral_mass"

@@ -291,6 +291,8 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
     ranking = [e["effect"] for e in entries
                if e.get("evidence", e.get("heldout_gain", 2.0)) > 1.0]
     predicted = report.get("best_effect") if verdict in ("explained", "ambiguous") else None
+    if predicted:  # (named by a rule outside the ranking, e.g. the level rule: first)
+        ranking = [predicted] + [n for n in ranking if n != predicted]
     label_pred = predicted or verdict
     red = [e["effect_share" if structural else "gap_reduction_heldout"] for e in entries
            if e["effect"] in hidden]
