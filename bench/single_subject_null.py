@@ -22,9 +22,9 @@ named, per direction the band of the reports' resonance shift against the
 model (data - model factor per doubling of the level: the peaks', and the
 frequency scale of the whole resonance region) that holds all but `alpha`
 of the subjects, and how many the level rule names
-(`resonance.softening_rule`; for reports made before it, from the frequency
-scale computed again from the trial's data, without the rule's noise guard:
-an upper bound).  A subject counts as named
+(`resonance.softening_rule` at its present threshold, from each subject's
+scale and noise; for reports made before the scale existed, both computed
+again from the trial's data).  A subject counts as named
 when either rule names it.  `--out` writes the per-subject values; such
 a file given in place of a run adds its subjects (a subject met twice, the
 same reality, blind seed and trial, counts once), so a calibration can grow
@@ -76,8 +76,6 @@ def subject_statistic(report: dict) -> dict:
     beyond = [e["reduction_beyond"] for e in st.get("ranking", []) if e["delta_bic"] < 0]
     ranking = report.get("ranking") or []
     resonance = (report.get("evidence") or {}).get("resonance") or {}
-    # (A rule read from the resonance peaks, before the frequency scale, is not this rule.)
-    rule = report.get("level_rule") if "scale" in json.dumps(resonance) else None
     return {"verdict": report["verdict"], "named": report.get("best_effect"),
             "resonance_difference": {d: e["data_per_doubling"] - e["model_per_doubling"]
                                      for d, e in resonance.items()
@@ -93,19 +91,18 @@ def subject_statistic(report: dict) -> dict:
             "structural_ran": bool(st.get("ran")),
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
             "structural_best": next((e["effect"] for e in st.get("ranking", [])
-                                     if e["delta_bic"] < 0), None),
-            **({"level_rule_named": bool(rule["named"])} if rule else {})}
+                                     if e["delta_bic"] < 0), None)}
 
 
 def level_rule_names(subject: dict) -> bool:
-    """Whether the level rule names softening on this subject: as its report
-    said, or, for a report made before the rule, from its vertical shift
-    against the rule's threshold (without the noise guard)."""
-    from ehm_drake.gap.single.resonance import SOFTENING_SHIFT
+    """Whether the level rule as shipped now names softening on this subject,
+    from its vertical scale difference and, where known, its noise (the
+    reports' own reading may come from an earlier threshold)."""
+    from ehm_drake.gap.single.resonance import SOFTENING_SHIFT, SOFTENING_SIGMAS
 
-    if "level_rule_named" in subject:
-        return subject["level_rule_named"]
-    return subject.get("scale_difference", {}).get("z", 0.0) < -SOFTENING_SHIFT
+    diff = subject.get("scale_difference", {}).get("z")
+    sd = subject.get("scale_std", {}).get("z") or 0.0
+    return diff is not None and diff < -SOFTENING_SHIFT and diff < -SOFTENING_SIGMAS * sd
 
 
 def named_effect(subject: dict) -> str | None:

@@ -250,7 +250,7 @@ def test_the_single_subject_null_study_counts_what_the_rule_names(tmp_path):
     # (-0.0125) alone; the structural rule had not named it (0.02).
     assert s["level_rule_named"] == 1
     assert s["scale"]["z"]["band_at_alpha"] == pytest.approx([-0.0125, 0.0325])
-    # A report that carries the rule's own reading is taken as it says.
-    quiet = dict(data["lumped"][0], level_rule_named=False)
+    # The same shift with three times its noise beyond it is not named.
+    quiet = dict(data["lumped"][0], scale_std={"z": 0.005})
     assert bench.named_effect(quiet) is None and bench.named_effect(data["lumped"][0]) == \
         "softening"
