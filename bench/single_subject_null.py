@@ -111,9 +111,10 @@ def named_effect(subject: dict) -> str | None:
     return subject["named"] or ("softening" if level_rule_names(subject) else None)
 
 
-def collect(runs) -> dict:
+def collect(runs, known=frozenset()) -> dict:
     """{reality: [subject statistics]} of the no-effect trials of blind runs
-    made without a reference group."""
+    made without a reference group; trials in `known` ((reality, seed,
+    trial) already counted with their frequency scale) are left out."""
     out: dict[str, list] = {}
     for run in map(Path, runs):
         settings_path = run / "blind_settings.json"
@@ -131,6 +132,9 @@ def collect(runs) -> dict:
             rep_path = rf.parent / "diagnosis" / "report.json"
             if "skipped" in r or r.get("hidden") or not rep_path.exists():
                 continue
+            if (reality, seed, rf.parent.name) in known:
+                found += 1
+                continue
             report = json.loads(rep_path.read_text())
             if not any("scale" in e for e in report["evidence"]["resonance"].values()):
                 report["evidence"]["resonance"] = recomputed_resonance(rf.parent / "data")
@@ -147,7 +151,8 @@ def collect(runs) -> dict:
 def gather(sources) -> dict:
     """{reality: [subject statistics]} from blind run folders (`collect`)
     and files of per-subject values written by `--out`; a subject found
-    twice (same reality, seed and trial) counts once."""
+    twice (same reality, seed and trial) counts once, and is not diagnosed
+    again when a file already holds its frequency scale."""
     merged: dict[str, dict] = {}
     for src in map(Path, sources):
         if src.is_file():
@@ -160,7 +165,8 @@ def gather(sources) -> dict:
                 raise SystemExit(f"{src}: not a file of subject values "
                                  "({reality: [subjects]}, as --out writes)")
         else:
-            data = collect([src])
+            data = collect([src], {(r, *k) for r, v in merged.items()
+                                   for k, s in v.items() if "scale_difference" in s})
         for reality, subjects in data.items():
             for s in subjects:
                 merged.setdefault(reality, {})[(s.get("seed"), s["trial"])] = s
