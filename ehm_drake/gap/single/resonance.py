@@ -53,7 +53,7 @@ SCALE_PER_DOUBLING = (0.7, 1.3)
 #: No-effect subjects of the two independent realities, diagnosed alone at
 #: 0.3 and 0.6 m/s^2, all lie above it (bench/single_subject_null.py; the
 #: subjects and their values in docs/history/data/single_subject_null.json;
-#: lowest +0.009, on `lumped`: those bodies soften less than the model); the
+#: lowest +0.006, on `lumped`: those bodies soften less than the model); the
 #: model's own family lies at 0 within the noise, which the noise guard below
 #: covers.  The margin below 0 is about 8% of people's whole softening
 #: (about -0.13 per doubling, x0.87; Fairley & Griffin 1989), left for a
