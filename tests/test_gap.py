@@ -556,7 +556,7 @@ def test_level_rule_names_softening_beyond_the_models_own():
                 "structural": {"ranking": [{"effect": "softening", "effect_share": 0.01}]}}
 
     r = report("structural")
-    apply_softening_rule(r, ["arms", "softening"])
+    assert apply_softening_rule(r, ["arms", "softening"])
     assert (r["verdict"], r["best_effect"]) == ("explained", "softening")
     assert r["explanation"].startswith("level rule") and "removes 1% of the held-out gap" in \
         r["explanation"]
@@ -573,6 +573,6 @@ def test_level_rule_names_softening_beyond_the_models_own():
     for verdict, best, names in (("explained", "arms", ["arms", "softening"]),
                                  ("structural", None, ["arms"])):
         r = report(verdict, best)
-        apply_softening_rule(r, names)
+        assert not apply_softening_rule(r, names)
         assert (r["verdict"], r["best_effect"]) == (verdict, best)
         assert r["level_rule"]["named"]

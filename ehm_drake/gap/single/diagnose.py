@@ -586,7 +586,13 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
         sp = structural_pass(state, results, names, workers, progress)
         apply_to_report(report, sp, rows)
         t_fit = time.perf_counter() - t1
-    apply_softening_rule(report, names)
+    if apply_softening_rule(report, names):
+        # The gap after, and where it lies, with the named effect's own fit.
+        res, keys = results["softening"], cell_keys(rows)
+        report["gap_after"] = {"train": gap_value(res["chi_all"], keys),
+                               "heldout": _heldout_gap(res["chi_heldout"], keys)}
+        cells_after = localize(rows, res["chi_all"])
+        report["localization"] = mark_after(cells_before, cells_after)
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
                           "total": time.perf_counter() - t_start, "workers": nwork}
     return Diagnosis(report, rows, results, base_names, cells_before, cells_after)

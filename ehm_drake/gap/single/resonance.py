@@ -256,17 +256,18 @@ def softening_rule(resonance: dict) -> dict | None:
                           and diff < -SOFTENING_SIGMAS * sd)}
 
 
-def apply_softening_rule(report: dict, names) -> None:
+def apply_softening_rule(report: dict, names) -> bool:
     """Record the level rule in a single-subject report (`level_rule`) and,
     when it names `softening` (a candidate of this diagnosis) and nothing
-    else was named, make the verdict `explained` by it.  The candidate's own
+    else was named, make the verdict `explained` by it (True; the caller
+    sets the gap after it from the candidate's fit).  The candidate's own
     fit (its held-out share of the gap) is quoted beside it: it is judged on
     every channel and band, where the resonance shift weighs little."""
     rule = softening_rule(report["evidence"]["resonance"])
     report["level_rule"] = rule
     if (rule is None or not rule["named"] or "softening" not in names
             or report["verdict"] in ("explained", "ambiguous")):
-        return
+        return False
     st = report.get("structural") or {}
     fitted = next((e for e in st.get("ranking", []) if e["effect"] == "softening"), None)
     if fitted:
@@ -288,3 +289,4 @@ def apply_softening_rule(report: dict, names) -> None:
         f"the measurement noise, {rule['noise_std']:.3f}); the softening candidate's own fit "
         f"over every channel and band, where the shift weighs little, {fit}. Without the "
         f"rule: {before}")
+    return True
