@@ -96,13 +96,13 @@ def subject_statistic(report: dict) -> dict:
 
 def level_rule_names(subject: dict) -> bool:
     """Whether the level rule as shipped now names softening on this subject,
-    from its vertical scale difference and, where known, its noise (the
-    reports' own reading may come from an earlier threshold)."""
-    from ehm_drake.gap.single.resonance import SOFTENING_SHIFT, SOFTENING_SIGMAS
+    from its vertical scale difference and noise, as the rule decides
+    (`resonance.names_softening`; the reports' own reading may come from an
+    earlier threshold)."""
+    from ehm_drake.gap.single.resonance import names_softening
 
     diff = subject.get("scale_difference", {}).get("z")
-    sd = subject.get("scale_std", {}).get("z") or 0.0
-    return diff is not None and diff < -SOFTENING_SHIFT and diff < -SOFTENING_SIGMAS * sd
+    return diff is not None and names_softening(diff, subject.get("scale_std", {}).get("z"))
 
 
 def named_effect(subject: dict) -> str | None:

@@ -432,6 +432,12 @@ def _heldout_gap(chi: np.ndarray, keys: np.ndarray) -> float:
     return gap_value(chi, keys)
 
 
+def _gap_of(res: dict, keys: np.ndarray) -> dict:
+    """The gap a candidate's fit leaves: on the fitted data and held out."""
+    return {"train": gap_value(res["chi_all"], keys),
+            "heldout": _heldout_gap(res["chi_heldout"], keys)}
+
+
 def _ranking_entry(name, res, base, n_base, n_rows, base_names, keys) -> dict:
     cand = Candidate(() if name == "none" else tuple(name.split("+")))
     theta = np.array(res["theta"])
@@ -588,9 +594,8 @@ def diagnose(data, params: ModelParams | None = None, effects=None,
         t_fit = time.perf_counter() - t1
     if apply_softening_rule(report, names):
         # The gap after, and where it lies, with the named effect's own fit.
-        res, keys = results["softening"], cell_keys(rows)
-        report["gap_after"] = {"train": gap_value(res["chi_all"], keys),
-                               "heldout": _heldout_gap(res["chi_heldout"], keys)}
+        res = results["softening"]
+        report["gap_after"] = _gap_of(res, cell_keys(rows))
         cells_after = localize(rows, res["chi_all"])
         report["localization"] = mark_after(cells_before, cells_after)
     report["timing_s"] = {"families": t_fam, "fits": t_fit,
@@ -618,9 +623,7 @@ def _assemble(lab, rows, results, base_names, names, state, fold_kind, folds):
     after_res = results[best["effect"]] if best else base
     cells_after = localize(rows, after_res["chi_all"])
     localization = mark_after(cells_before, cells_after)
-    g = {k: {"train": gap_value(r["chi_all"], keys),
-             "heldout": _heldout_gap(r["chi_heldout"], keys)}
-         for k, r in (("before", base), ("after", after_res))}
+    g = {"before": _gap_of(base, keys), "after": _gap_of(after_res, keys)}
     report = {
         "verdict": verdict,
         "best_effect": best_effect if verdict in ("explained", "ambiguous") else None,

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from ...systems.outputs import CHANNEL_NAMES
-from .localize import Rows
+from .localize import Rows, relative_variance
 
 #: The resonance against level: the excited direction's own translation of
 #: these segments, peaks searched in this band (Hz; the seated body's
@@ -94,8 +94,6 @@ def _curves(rows: Rows, direction: str, level: float, segments, H=None) -> list:
     (log f, log |H|, relative variance with the model floor, relative
     variance of the measurement alone) of one test; H defaults to the
     measured rows (else a prediction of every row)."""
-    from .localize import relative_variance
-
     H = rows.H if H is None else H
     out = []
     for seg in segments:
@@ -235,6 +233,15 @@ def shift_noise(rows: Rows, direction: str, lo: float, hi: float, segments,
     return float(np.std(factors)) if len(factors) > 1 else math.nan
 
 
+def names_softening(difference: float, noise_std: float | None) -> bool:
+    """The level rule's decision on a vertical scale difference (data -
+    model, per doubling) and its noise standard deviation: beyond
+    `SOFTENING_SHIFT` and `SOFTENING_SIGMAS` of the noise; never without a
+    noise estimate."""
+    return bool(noise_std is not None and difference < -SOFTENING_SHIFT
+                and difference < -SOFTENING_SIGMAS * noise_std)
+
+
 def softening_rule(resonance: dict) -> dict | None:
     """The single-subject level rule on a `resonance_shift` result (with the
     model's prediction): `named` when the vertical frequency scale per
@@ -252,8 +259,7 @@ def softening_rule(resonance: dict) -> dict | None:
             "data_per_doubling": sc["data_per_doubling"],
             "model_per_doubling": sc["model_per_doubling"], "difference": diff,
             "noise_std": sd, "threshold": -SOFTENING_SHIFT, "sigmas": SOFTENING_SIGMAS,
-            "named": bool(sd is not None and diff < -SOFTENING_SHIFT
-                          and diff < -SOFTENING_SIGMAS * sd)}
+            "named": names_softening(diff, sd)}
 
 
 def apply_softening_rule(report: dict, names) -> bool:
