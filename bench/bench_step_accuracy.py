@@ -1,5 +1,5 @@
 """Step size vs speed vs accuracy of the implicit design, against the 1 ms
-reference design (`ehm-drake simulate --design reference`, the default) and
+reference design (`ehm-drake simulate --design reference`, the paper's) and
 against the reference design converged (a 0.25 ms step).
 
     python bench/bench_step_accuracy.py [--steps 0.0025,0.005]

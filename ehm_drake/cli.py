@@ -38,7 +38,13 @@ from .cli_common import (
 )
 from .gap.commands import add_gap_arguments
 from .model.anthropometry import REFERENCE, BodyMeasures
-from .params import IMPLICIT_TIME_STEP_S, VARIANTS, ParameterError, load_params
+from .params import (
+    IMPLICIT_TIME_STEP_S,
+    VARIANTS,
+    ParameterError,
+    command_design,
+    load_params,
+)
 from .signals import KINDS, PAPER_RMS, SignalError
 from .sweep import add_sweep_arguments
 from .validation.command import add_validate_arguments
@@ -62,7 +68,7 @@ def _measures(args) -> BodyMeasures:
 # ---------------------------------------------------------------------------
 
 
-def _add_model_arguments(p: argparse.ArgumentParser) -> None:
+def _add_model_arguments(p: argparse.ArgumentParser, simulation: bool = False) -> None:
     p.add_argument("--variant", choices=VARIANTS, default="default",
                    help="model variant of the paper (default: %(default)s)")
     p.add_argument("--params", metavar="FILE", help="parameter file (YAML/JSON), merged over "
@@ -75,16 +81,19 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="sitting height (m); default scales with stature")
     p.add_argument("--contact", choices=("point", "hydroelastic"),
                    help="contact model (default: from the parameters, point)")
-    add_design_arguments(p)
+    add_design_arguments(p, simulation)
 
 
-def _load_model_params(args):
+def _load_model_params(args, simulation: bool = False):
     from .diagram import on_design
 
     params = load_params(args.params)
     if getattr(args, "contact", None):
         params.contact.model = args.contact
-    design, step = getattr(args, "design", None), getattr(args, "time_step", None)
+    design = getattr(args, "design", None)
+    if simulation:  # (the linear analyses keep the parameters' design)
+        design = command_design(args.params, design)
+    step = getattr(args, "time_step", None)
     by_accuracy = (design == "implicit" and params.simulation.design != "implicit"
                    and step is None)
     params = on_design(params, design, step, _measures(args), args.variant,
@@ -106,7 +115,7 @@ def cmd_simulate(args) -> int:
 
     if args.excitation == "csv" and not args.csv:
         raise UsageError("--excitation csv needs --csv FILE (columns t, seat_ax, seat_ay, seat_az)")
-    params = _load_model_params(args)
+    params = _load_model_params(args, simulation=True)
     measures = _measures(args)
     out = prepare_output_dir(args.out, args.force)
     s = params.simulation
@@ -526,7 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "--excitation csv (columns t, seat_ax, seat_ay, seat_az)")
     p.add_argument("--settled", metavar="FILE", help="restart from a saved settled state "
                    "(settled_state.npz of an earlier run with the same model)")
-    _add_model_arguments(p)
+    _add_model_arguments(p, simulation=True)
     p.add_argument("--output-every", type=int_at_least(1, "--output-every"), metavar="K",
                    help="record the outputs every K time steps, at 1 / (K step) exactly "
                    "(default: the parameters' rate, 200 Hz, whose period must be a whole "

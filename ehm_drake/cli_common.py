@@ -65,19 +65,23 @@ def csv_floats(name: str):
     return parse
 
 
-def add_design_arguments(p: argparse.ArgumentParser) -> None:
+def add_design_arguments(p: argparse.ArgumentParser, simulation: bool = False) -> None:
     """``--design`` and ``--time-step``: how the model's joints are built and
-    its step (resolved by `ehm_drake.diagram.on_design`)."""
+    its step (resolved by `ehm_drake.diagram.on_design`).  `simulation`: the
+    command simulates in the time domain and runs the implicit design unless
+    told otherwise (`params.command_design`); the others keep the parameters'
+    design, on which their calibrations were measured."""
+    default = ("implicit, or the --params file's if it states its design or step"
+               if simulation else "from the parameters, reference")
     p.add_argument("--design", choices=("reference", "implicit"),
-                   help="joint design (default: from the parameters, reference): reference "
-                   "= the paper's spherical joints, feedback explicit, 1 ms step; implicit = "
-                   "Cardan joint chains, stiff feedback in the implicit solve, a step chosen by "
-                   "accuracy (5 ms; 5/3 ms for the high-stiffness variant), about "
-                   "3x faster (docs/designs.md)")
+                   help=f"joint design (default: {default}): implicit = Cardan joint chains, "
+                   "stiff feedback in the implicit solve, a step chosen by accuracy (5 ms; "
+                   "5/3 ms for the high-stiffness variant); reference = the paper's spherical "
+                   "joints, feedback explicit, 1 ms step, about 3x slower (docs/designs.md)")
     p.add_argument("--time-step", type=positive_float("--time-step"), metavar="S",
-                   help="simulation time step in seconds (default: the parameters', or the "
-                   "design's own when --design changes it: reference 0.001, implicit the "
-                   "largest of 0.005 / n that keeps the model second-order accurate)")
+                   help="simulation time step in seconds (default: the design's own: "
+                   "implicit the largest of 0.005 / n that keeps the model second-order "
+                   "accurate, reference 0.001; the parameters' step on their own design)")
 
 
 def prepare_output_dir(path: str | Path, force: bool) -> Path:

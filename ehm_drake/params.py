@@ -603,6 +603,35 @@ def with_design(params: ModelParams, design: str | None = None,
     return validate(p)
 
 
+#: The design the commands run when neither ``--design`` nor the parameter
+#: file names one: the implicit design at its accurate step (about three
+#: times faster than the paper's design, and nearer the converged response:
+#: docs/designs.md).  `load_params()` itself keeps the parameter file's
+#: design (the paper's reference design in the packaged defaults).
+COMMAND_DESIGN = "implicit"
+
+
+def names_stepping(path: str | Path | None) -> bool:
+    """Whether the parameter file at `path` states ``simulation.design`` or
+    ``simulation.time_step_s`` (None: the packaged defaults, which the
+    commands do not count as a choice): a step chosen for one design is
+    kept on it."""
+    if path is None:
+        return False
+    data = read_params_mapping(resolve_params_path(path))
+    sim = data.get("simulation")
+    return isinstance(sim, dict) and ("design" in sim or "time_step_s" in sim)
+
+
+def command_design(path: str | Path | None, design: str | None) -> str | None:
+    """The design a command runs: `design` (``--design``) when given, else
+    the parameter file's when it states its design or step (None: keep
+    them), else `COMMAND_DESIGN`."""
+    if design is not None or names_stepping(path):
+        return design
+    return COMMAND_DESIGN
+
+
 def reference_design(params: ModelParams) -> ModelParams:
     """A copy of `params` on the reference design: spherical joints with the
     feedback explicit, at the paper's 1 ms step (the accuracy reference of

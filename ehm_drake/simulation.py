@@ -133,6 +133,9 @@ class SettledState:
     summary: dict = field(default_factory=dict)
     #: Where the plant's [q; v] sits in `state`: (start, nq, nv).
     plant_layout: tuple = (0, 0, 0)
+    #: The design and time step (s) it was settled on ("" and 0: not recorded).
+    design: str = ""
+    time_step_s: float = 0.0
 
     @property
     def positions(self) -> np.ndarray:
@@ -151,7 +154,8 @@ class SettledState:
 
     def save(self, path: str | Path) -> None:
         np.savez(path, state=self.state, fingerprint=self.fingerprint, variant=self.variant,
-                 summary=json.dumps(self.summary), plant_layout=np.array(self.plant_layout))
+                 summary=json.dumps(self.summary), plant_layout=np.array(self.plant_layout),
+                 design=self.design, time_step_s=self.time_step_s)
 
     @classmethod
     def load(cls, path: str | Path) -> SettledState:
@@ -159,7 +163,9 @@ class SettledState:
             layout = tuple(int(v) for v in f["plant_layout"]) if "plant_layout" in f \
                 else (0, 0, 0)
             return cls(f["state"], str(f["fingerprint"]), str(f["variant"]),
-                       json.loads(str(f["summary"])), layout)
+                       json.loads(str(f["summary"])), layout,
+                       str(f["design"]) if "design" in f else "",
+                       float(f["time_step_s"]) if "time_step_s" in f else 0.0)
 
 
 def _fixed_inputs(model: EhmDiagram, context) -> None:
@@ -536,7 +542,8 @@ def settle(params: ModelParams, measures: BodyMeasures = REFERENCE,
     plant = vmap.slice("plant")
     return SettledState(vmap.get(vctx), model_fingerprint(params, measures, variant, effects),
                         variant, summary, (plant.start, model.plant.num_positions(),
-                                           model.plant.num_velocities()))
+                                           model.plant.num_velocities()),
+                        params.simulation.design, params.simulation.time_step_s)
 
 
 def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
@@ -551,6 +558,14 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
     """
     variant = variant or settled.variant
     if settled.fingerprint != model_fingerprint(params, measures, variant, effects):
+        sim = params.simulation
+        if settled.design and (settled.design, settled.time_step_s) != (sim.design,
+                                                                        sim.time_step_s):
+            raise ValueError(f"the settled state was computed on the {settled.design} design "
+                             f"at a {settled.time_step_s * 1e3:g} ms step, this run is on the "
+                             f"{sim.design} design at {sim.time_step_s * 1e3:g} ms: run it "
+                             f"with --design {settled.design} (and --time-step "
+                             f"{settled.time_step_s:g}), or settle again")
         raise ValueError("the settled state was computed for other parameters, body, "
                          "variant or effects; settle again")
     period = 1.0 / params.simulation.output_rate_hz

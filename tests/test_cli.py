@@ -17,8 +17,8 @@ pytestmark = pytest.mark.xdist_group("cli")
 @pytest.fixture(scope="module")
 def sim_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "run"
-    assert main(["simulate", "--duration", "12", "--direction", "z", "--seed", "3",
-                 "--out", str(out), "--quiet"]) == 0
+    assert main(["simulate", "--design", "reference", "--duration", "12", "--direction", "z",
+                 "--seed", "3", "--out", str(out), "--quiet"]) == 0
     return out
 
 
@@ -44,10 +44,17 @@ def test_simulate_writes_summary_series_and_plots(sim_dir):
     assert gain.max() > 1.0  # a vertical resonance amplifies the head
 
 
-def test_restart_from_settled_state(sim_dir, tmp_path):
+def test_restart_from_settled_state(sim_dir, tmp_path, capsys):
     out = tmp_path / "again"
+    assert main(["simulate", "--design", "reference", "--duration", "3", "--settled",
+                 str(sim_dir / "settled_state.npz"), "--out", str(out), "--quiet"]) == 0
+    # On another design (the commands' default is the implicit one) the
+    # state does not fit: a one-line error naming both designs, nothing run.
+    capsys.readouterr()
     assert main(["simulate", "--duration", "3", "--settled", str(sim_dir / "settled_state.npz"),
-                 "--out", str(out), "--quiet"]) == 0
+                 "--out", str(tmp_path / "other"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "reference design at a 1 ms step" in err and "--design reference" in err
 
 
 def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tmp_path, capsys):
@@ -57,7 +64,7 @@ def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tm
     runs = {}
     for name, extra in (("with", []), ("without", ["--no-figures", "--verbose"])):
         out = runs[name] = tmp_path / name
-        assert main(["simulate", "--duration", "3", "--settled",
+        assert main(["simulate", "--design", "reference", "--duration", "3", "--settled",
                      str(sim_dir / "settled_state.npz"), "--out", str(out), "--quiet",
                      *extra]) == 0
     assert not list(runs["without"].glob("*.png"))
@@ -140,9 +147,11 @@ def test_unstable_parameters_exit_3(tmp_path, capsys):
     assert "diverged" in capsys.readouterr().err
 
 
-def test_design_option_runs_the_implicit_design_at_its_own_step(sim_dir, tmp_path):
+def test_simulate_runs_the_implicit_design_at_its_own_step_by_default(sim_dir, tmp_path):
+    """No --design: the implicit design at 5 ms, the same body as the paper's
+    reference design (``--design reference``, the fixture's run)."""
     out = tmp_path / "implicit"
-    assert main(["simulate", "--design", "implicit", "--duration", "12", "--direction", "z",
+    assert main(["simulate", "--duration", "12", "--direction", "z",
                  "--seed", "3", "--out", str(out), "--quiet"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["design"], summary["time_step_s"]) == ("implicit", 0.005)

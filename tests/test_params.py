@@ -7,8 +7,10 @@ import json
 import pytest
 
 from ehm_drake.params import (
+    COMMAND_DESIGN,
     ParameterError,
     apply_variant,
+    command_design,
     load_params,
     params_from_dict,
     save_params,
@@ -205,3 +207,27 @@ def test_fit_bounds_lie_within_the_admissible_ranges(params):
             assert r.unit == fp.unit, (fp.name, path)
             top = r.hi(params) if callable(r.hi) else r.hi
             assert r.lo <= lo < hi <= top and (lo > 0 or not r.lo_open), (fp.name, path)
+
+
+def test_commands_run_the_implicit_design_unless_the_file_states_the_stepping(tmp_path,
+                                                                                params):
+    """The commands' design: --design when given; else a parameter file's
+    that states its design or its step (a step chosen for one design stays
+    on it); else the implicit design, also for the packaged configurations.
+    `load_params()` itself keeps the paper's reference design."""
+    assert params.simulation.design == "reference" and COMMAND_DESIGN == "implicit"
+    assert command_design(None, None) == "implicit"
+    assert command_design(None, "reference") == "reference"
+    assert command_design("rigid_seat", None) == "implicit"
+    cases = {"design.yaml": "simulation: {design: reference}\n",
+             "step.yaml": "simulation: {time_step_s: 0.0005}\n",
+             "other.yaml": "simulation: {settle_time_s: 2.0}\n"}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+    assert command_design(tmp_path / "design.yaml", None) is None
+    assert command_design(tmp_path / "step.yaml", None) is None
+    assert command_design(tmp_path / "step.yaml", "implicit") == "implicit"
+    assert command_design(tmp_path / "other.yaml", None) == "implicit"
+    # A complete parameter set (save_params, a fit's output) states both.
+    save_params(params, tmp_path / "all.yaml")
+    assert command_design(tmp_path / "all.yaml", None) is None

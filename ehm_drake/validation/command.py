@@ -26,7 +26,8 @@ def add_validate_arguments(sub) -> None:
     p.add_argument("--seed", type=int_at_least(0, "--seed"), default=1, metavar="N",
                    help="seed of the first run's excitation (run i gets N + i)")
     p.add_argument("--design", choices=("reference", "implicit"),
-                   help="simulation design (default: the parameters')")
+                   help="simulation design (default: implicit, or the --params file's if it "
+                   "states its design or step; docs/designs.md)")
     p.add_argument("--workers", type=int_at_least(1, "--workers"), default=2,
                    help="parallel processes (default 2)")
     p.add_argument("--out", required=True, metavar="DIR")
@@ -36,7 +37,7 @@ def add_validate_arguments(sub) -> None:
 
 
 def cmd_validate(args) -> int:
-    from ..params import load_params
+    from ..params import command_design, load_params
     from .reference import read_reference
     from .report import validate
 
@@ -45,7 +46,8 @@ def cmd_validate(args) -> int:
         read_reference(path)
     out = prepare_output_dir(args.out, args.force)
     report = validate(out, args.params, args.reference, args.duration, args.seed,
-                      args.design, args.workers, progress=not args.quiet)
+                      command_design(args.params, args.design), args.workers,
+                      progress=not args.quiet)
     if not args.quiet:
         s = report["summary"]
         print(f"{s['passed']} of {s['facts']} facts reproduced ({s['publications']} "

@@ -33,8 +33,12 @@ SWEEP_SPEC = {
 #: (command name, argv after `ehm-drake`, output folder).  Run in order:
 #: diagnose reads synth's data.
 CASES = (
-    ("simulate", ["simulate", "--out", "simulate", "--duration", "3", "--direction", "xyz",
-                  "--seed", "1", "--quiet"], "simulate"),
+    ("simulate", ["simulate", "--design", "reference", "--out", "simulate", "--duration", "3",
+                  "--direction", "xyz", "--seed", "1", "--quiet"], "simulate"),
+    # The commands' default design (implicit, 5 ms).
+    ("simulate_implicit", ["simulate", "--out", "simulate_implicit", "--duration", "3",
+                           "--direction", "xyz", "--seed", "1", "--quiet"],
+     "simulate_implicit"),
     ("sweep", ["sweep", "sweep_spec.json", "--out", "sweep", "--workers", "2", "--quiet"],
      "sweep"),
     ("synth", ["synth", "--effect", "seat_foam_stiffening", "--strength", "1", "--seed", "5",
