@@ -6,9 +6,10 @@ On a body that is not the model the ordinary pass seldom explains anything
 (the model-form gap dominates) and the structural pass decides: a candidate
 is named when it lowers the held-out chi^2 by more than its BIC penalty and
 removes at least `discrepancy.EXPLAINED_BEYOND` of the held-out gap left
-beyond the discrepancy.  Each no-effect subject contributes its largest
-such removal (0 when no candidate has a negative delta BIC, or the pass did
-not run): the rule's statistic under the null.  This script collects it
+beyond the discrepancy.  Each no-effect subject contributes the removal of
+the candidate the rule judges, the first by delta BIC (0 when its delta BIC
+is not negative, or the pass did not run): the rule's statistic under the
+null, judged at the threshold shipped now.  This script collects it
 from blind runs made without a reference group, e.g.
 
     ehm-drake blind --reality lumped --trials 30 --p-none 1 --p-two 0 --seed S \\
@@ -91,7 +92,26 @@ def subject_statistic(report: dict) -> dict:
             "structural_ran": bool(st.get("ran")),
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
             "structural_best": next((e["effect"] for e in st.get("ranking", [])
-                                     if e["delta_bic"] < 0), None)}
+                                     if e["delta_bic"] < 0), None),
+            # What the rule itself judges: the first of the structural ranking
+            # (by delta BIC), if its delta BIC is negative.
+            **rule_statistic(st)}
+
+
+#: A subject's values that come from the resonance (recomputed for old reports).
+RESONANCE_KEYS = ("resonance_difference", "scale_difference", "scale_std")
+
+
+def rule_statistic(structural: dict) -> dict:
+    """The structural rule's own statistic (`discrepancy.structural_pass`):
+    the removal beyond the discrepancy of the first candidate by delta BIC,
+    0 when its delta BIC is not negative or the pass did not run; and that
+    candidate."""
+    first = (structural.get("ranking") or [None])[0] if structural.get("ran") else None
+    if first is None or first["delta_bic"] >= 0:
+        return {"structural_rule_statistic": 0.0, "structural_rule_effect": None}
+    return {"structural_rule_statistic": first["reduction_beyond"],
+            "structural_rule_effect": first["effect"]}
 
 
 def level_rule_names(subject: dict) -> bool:
@@ -107,8 +127,16 @@ def level_rule_names(subject: dict) -> bool:
 
 def named_effect(subject: dict) -> str | None:
     """The effect a subject's single-subject diagnosis names under the rules
-    shipped now (the structural rule's, else the level rule's)."""
-    return subject["named"] or ("softening" if level_rule_names(subject) else None)
+    shipped now (the structural rule's at the present `EXPLAINED_BEYOND`,
+    where the subject's values hold the rule's statistic, else the report's
+    own name; then the level rule's)."""
+    from ehm_drake.gap.single.discrepancy import EXPLAINED_BEYOND
+
+    named = subject["named"]
+    if subject.get("structural_ran") and "structural_rule_statistic" in subject:
+        named = (subject["structural_rule_effect"]
+                 if subject["structural_rule_statistic"] >= EXPLAINED_BEYOND else None)
+    return named or ("softening" if level_rule_names(subject) else None)
 
 
 def collect(runs, known=frozenset()) -> dict:
@@ -132,10 +160,15 @@ def collect(runs, known=frozenset()) -> dict:
             rep_path = rf.parent / "diagnosis" / "report.json"
             if "skipped" in r or r.get("hidden") or not rep_path.exists():
                 continue
+            report = json.loads(rep_path.read_text())
             if (reality, seed, rf.parent.name) in known:
+                # Held with its resonance already: the report's other values
+                # only (no diagnosis again).
+                s = {k: v for k, v in subject_statistic(report).items()
+                     if k not in RESONANCE_KEYS}
+                out.setdefault(reality, []).append(dict(s, trial=rf.parent.name, seed=seed))
                 found += 1
                 continue
-            report = json.loads(rep_path.read_text())
             if not any("scale" in e for e in report["evidence"]["resonance"].values()):
                 report["evidence"]["resonance"] = recomputed_resonance(rf.parent / "data")
             s = subject_statistic(report)
@@ -169,7 +202,9 @@ def gather(sources) -> dict:
                                    for k, s in v.items() if "scale_difference" in s})
         for reality, subjects in data.items():
             for s in subjects:
-                merged.setdefault(reality, {})[(s.get("seed"), s["trial"])] = s
+                held = merged.setdefault(reality, {})
+                key = (s.get("seed"), s["trial"])
+                held[key] = {**held.get(key, {}), **s}
     return {r: list(v.values()) for r, v in merged.items()}
 
 
@@ -207,7 +242,7 @@ def resonance_band(subjects: list, alpha: float, key: str = "resonance_differenc
 def summary(subjects: list, alpha: float) -> dict:
     n = len(subjects)
     named = [named_effect(s) for s in subjects if named_effect(s)]
-    stat = [s["structural_statistic"] for s in subjects]
+    stat = [s.get("structural_rule_statistic", s["structural_statistic"]) for s in subjects]
     return {"subjects": n, "named": len(named),
             "named_effects": sorted(set(named)),
             "level_rule_named": sum(map(level_rule_names, subjects)),

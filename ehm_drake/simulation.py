@@ -567,7 +567,8 @@ def vibrate(params: ModelParams, settled: SettledState, signal: SeatSignal,
                              f"with --design {settled.design} (and --time-step "
                              f"{settled.time_step_s:g}), or settle again")
         raise ValueError("the settled state was computed for other parameters, body, "
-                         "variant or effects; settle again")
+                         "variant, effects or design; settle again (or run it on the design "
+                         "it was settled on: --design reference|implicit)")
     period = 1.0 / params.simulation.output_rate_hz
     model = build_diagram(params, measures, signal, variant, log_period=period, effects=effects)
     ctx = model.diagram.CreateDefaultContext()

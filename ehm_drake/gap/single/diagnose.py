@@ -42,7 +42,7 @@ Procedure (`diagnose`):
    its scale estimated from the data, is fitted; if it removes at least half
    of the held-out gap, the candidates are scored again beyond it.  Verdict
    `structural` (the model's form dominates the gap; where it lies) unless
-   one effect removes at least 15% of what remains beyond the discrepancy,
+   one effect removes at least 20% of what remains beyond the discrepancy,
    then `explained` with the effect's own share of the gap.
 6. Evidence from the data alone: level dependence (the same direction's
    FRF at two levels differing beyond their uncertainty) and coherence
