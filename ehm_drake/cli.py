@@ -98,11 +98,16 @@ def _load_model_params(args, simulation: bool = False):
                    and step is None)
     params = on_design(params, design, step, _measures(args), args.variant,
                        getattr(args, "output_every", None))
-    if by_accuracy and not getattr(args, "quiet", False) and \
-            params.simulation.time_step_s < IMPLICIT_TIME_STEP_S:
+    quiet = getattr(args, "quiet", False)
+    if by_accuracy and not quiet and params.simulation.time_step_s < IMPLICIT_TIME_STEP_S:
         print(f"implicit design: time step {params.simulation.time_step_s * 1e3:.3g} "
               f"ms, the largest that keeps the {args.variant} model second-order "
               "accurate (--time-step sets another)", file=sys.stderr)
+    if simulation and design is None and params.simulation.design == "reference" and not quiet:
+        # The file chose the paper's slower design (a fit's output states it).
+        print(f"reference design at {params.simulation.time_step_s * 1e3:g} ms, as "
+              f"{args.params} states (--design implicit runs the faster design)",
+              file=sys.stderr)
     return params
 
 

@@ -9,6 +9,7 @@ import pytest
 
 from ehm_drake.analysis.formats import read_frf, read_timeseries
 from ehm_drake.cli import main
+from ehm_drake.params import save_params
 
 #: Module fixtures: the module's tests stay on one xdist worker (built once).
 pytestmark = pytest.mark.xdist_group("cli")
@@ -173,6 +174,17 @@ def test_simulate_runs_the_implicit_design_at_its_own_step_by_default(sim_dir, t
             band = (f >= lo) & (f <= hi)
             assert gain[band].mean() == pytest.approx(gain_ref[band].mean(), rel=0.06), \
                 (seg, lo, hi)
+
+
+def test_a_parameter_file_that_states_its_design_keeps_it_and_says_so(params, tmp_path,
+                                                                       capsys):
+    """A complete parameter set (a fit's output, `save_params`) states the
+    reference design: simulate keeps it, and says how to run the faster one."""
+    save_params(params, tmp_path / "all.yaml")
+    assert main(["simulate", "--params", str(tmp_path / "all.yaml"), "--duration", "2",
+                 "--no-figures", "--out", str(tmp_path / "run")]) == 0
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["design"] == "reference"
+    assert "--design implicit runs the faster design" in capsys.readouterr().err
 
 
 def test_output_every_k_steps_lets_a_step_that_does_not_divide_200_hz_run(sim_dir, tmp_path):
