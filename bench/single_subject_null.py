@@ -93,25 +93,20 @@ def subject_statistic(report: dict) -> dict:
             "structural_statistic": max(beyond, default=0.0) if st.get("ran") else 0.0,
             "structural_best": next((e["effect"] for e in st.get("ranking", [])
                                      if e["delta_bic"] < 0), None),
-            # What the rule itself judges: the first of the structural ranking
-            # (by delta BIC), if its delta BIC is negative.
-            **rule_statistic(st)}
+            "structural_rule_statistic": rule_statistic(st)}
 
 
 #: A subject's values that come from the resonance (recomputed for old reports).
 RESONANCE_KEYS = ("resonance_difference", "scale_difference", "scale_std")
 
 
-def rule_statistic(structural: dict) -> dict:
+def rule_statistic(structural: dict) -> float:
     """The structural rule's own statistic (`discrepancy.structural_pass`):
-    the removal beyond the discrepancy of the first candidate by delta BIC,
-    0 when its delta BIC is not negative or the pass did not run; and that
-    candidate."""
+    the removal beyond the discrepancy of the first candidate by delta BIC
+    (the subject's ``structural_best``), 0 when its delta BIC is not negative
+    or the pass did not run."""
     first = (structural.get("ranking") or [None])[0] if structural.get("ran") else None
-    if first is None or first["delta_bic"] >= 0:
-        return {"structural_rule_statistic": 0.0, "structural_rule_effect": None}
-    return {"structural_rule_statistic": first["reduction_beyond"],
-            "structural_rule_effect": first["effect"]}
+    return 0.0 if first is None or first["delta_bic"] >= 0 else first["reduction_beyond"]
 
 
 def level_rule_names(subject: dict) -> bool:
@@ -134,7 +129,7 @@ def named_effect(subject: dict) -> str | None:
 
     named = subject["named"]
     if subject.get("structural_ran") and "structural_rule_statistic" in subject:
-        named = (subject["structural_rule_effect"]
+        named = (subject["structural_best"]
                  if subject["structural_rule_statistic"] >= EXPLAINED_BEYOND else None)
     return named or ("softening" if level_rule_names(subject) else None)
 
