@@ -65,14 +65,15 @@ def csv_floats(name: str):
     return parse
 
 
-def add_design_arguments(p: argparse.ArgumentParser, simulation: bool = False) -> None:
+def add_design_arguments(p: argparse.ArgumentParser, implicit_default: bool = False) -> None:
     """``--design`` and ``--time-step``: how the model's joints are built and
-    its step (resolved by `ehm_drake.diagram.on_design`).  `simulation`: the
-    command simulates in the time domain and runs the implicit design unless
-    told otherwise (`params.command_design`); the others keep the parameters'
-    design, on which their calibrations were measured."""
+    its step (resolved by `ehm_drake.diagram.on_design`).  `implicit_default`:
+    the command runs the implicit design unless told otherwise
+    (`params.command_design`: simulate, validate, modes, fit); the gap
+    diagnosis keeps the parameters' design, on which its calibrations were
+    measured."""
     default = ("implicit, or the --params file's if it states its design or step"
-               if simulation else "from the parameters, reference")
+               if implicit_default else "from the parameters, reference")
     p.add_argument("--design", choices=("reference", "implicit"),
                    help=f"joint design (default: {default}): implicit = Cardan joint chains, "
                    "stiff feedback in the implicit solve, a step chosen by accuracy (5 ms; "

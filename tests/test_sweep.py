@@ -40,10 +40,12 @@ SHORT = {
     "direction": "z",
     "params": {"simulation": {"settle_time_s": 0.5, "onset_time_s": 0.5}},
 }
-GOOD_KP = [[25.0, 22.0, 15.0], [30.0, 26.0, 18.0]]
-#: An explicit neck gain of 1e6 N m/rad is unstable at h = 1 ms (head
-#: inertia ~0.02 kg m^2: omega h ~ 7 > 2): the run diverges.
-DIVERGING_KP = 1e6
+#: Head-in-space gains (N m/rad): the packaged ones and 20% more.
+GOOD_KP = [[20.0, 20.0, 12.0], [24.0, 24.0, 14.4]]
+#: The head-in-space feedback is explicit on both designs: a gain of 1e6
+#: N m/rad on the head (inertia ~0.02 kg m^2: omega h ~ 35 > 2 at the implicit
+#: design's 5 ms step) diverges within a few steps.
+DIVERGING_KP = [1e6, 1e6, 1e6]
 
 
 def spec_with(**over):
@@ -174,6 +176,27 @@ def test_grid_bodies_and_seats_expand_to_the_product():
     assert only.params == default_params_dict()
 
 
+def test_design_follows_the_simulate_command():
+    """`design: auto` is the implicit design unless the spec states the parameters'
+    design or step (anywhere a parameter can be set), which are then kept."""
+    (plain,) = expand_runs({})
+    assert plain.settings["design"] == "implicit"
+    assert plain.params["simulation"]["design"] == "reference"  # (the file's, switched at run)
+    stated = [{"params": {"simulation": {"time_step_s": 0.0005}}},
+              {"grid": {"simulation.time_step_s": [0.001, 0.0005]}},
+              {"seat": [{"name": "a", "contact.pelvis_pan.stiffness": 9e4}]},
+              {"params": {"simulation": {"design": "implicit", "time_step_s": 0.0025}}}]
+    designs = [{r.settings["design"] for r in expand_runs(s)} for s in stated]
+    # A seat configuration names no step: the default design.
+    assert designs == [{"reference"}, {"reference"}, {"implicit"}, {"implicit"}]
+    named = expand_runs({"design": "reference", "grid": {"design": ["implicit", "auto"]}})
+    assert [r.settings["design"] for r in named] == ["implicit", "implicit"]
+    (ref,) = expand_runs({"design": "reference"})
+    assert ref.settings["design"] == "reference" and ref.run_id != plain.run_id
+    with pytest.raises(SweepSpecError, match="design must be one of auto, implicit, reference"):
+        load_sweep_spec({"design": "fast"})
+
+
 def test_monte_carlo_is_seeded_and_reproducible():
     def spec(n, seed, **vary):
         return {"grid": {"rms": [0.2, 0.4]},
@@ -219,7 +242,7 @@ def test_monte_carlo_is_seeded_and_reproducible():
 
 
 def local_spec():
-    return spec_with(name="neck-gains", grid={"pid.neck.kp": [*GOOD_KP, DIVERGING_KP]})
+    return spec_with(name="neck-gains", grid={"his.kp": [*GOOD_KP, DIVERGING_KP]})
 
 
 @pytest.fixture(scope="module")
@@ -259,6 +282,8 @@ def test_local_sweep_records_runs_and_failures(local_sweep):
     assert head["weighted_rms"]["z"] > 0.1 and head["weighted_rms"]["x"] > 1e-4
     assert res["posture"]["back_in_contact"] is True
     assert res["wall_s"] > res["vibrate_wall_s"] > 0
+    # The default design, at the step chosen by accuracy for the default body.
+    assert res["design"] == "implicit" and res["time_step_s"] == pytest.approx(0.005)
     frf = read_frf(out / "runs" / f"{result.runs[0].run_id}.frf.csv")
     f, gain, _, _ = frf.get("z", "head", "z")
     assert np.max(gain[(f >= 0.5) & (f <= 12)]) == pytest.approx(peaks["z/head/z"]["peak_gain"],
@@ -267,7 +292,7 @@ def test_local_sweep_records_runs_and_failures(local_sweep):
     lines = (out / "summary.csv").read_text().splitlines()
     header = lines[0].split(",")
     assert len(lines) == 4
-    assert header[:4] == ["run_id", "index", "status", "pid.neck.kp"]
+    assert header[:4] == ["run_id", "index", "status", "his.kp"]
     assert {"seat_aw_overall", "head_aw_overall", "T_z_head_z_peak_gain",
             "error_type"} <= set(header)
     assert lines[3].startswith(f"{result.runs[2].run_id},2,failed,")
@@ -306,7 +331,7 @@ def test_resume_recomputes_only_missing_runs(local_sweep, tmp_path):
 def test_dask_cluster_runs_the_same_sweep(local_sweep, tmp_path):
     distributed = pytest.importorskip("distributed")
     result, _, _ = local_sweep
-    spec = spec_with(name="neck-gains", grid={"pid.neck.kp": GOOD_KP})
+    spec = spec_with(name="neck-gains", grid={"his.kp": GOOD_KP})
     with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                                   dashboard_address=None) as cluster:
         dask_result = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address,

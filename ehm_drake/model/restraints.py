@@ -29,9 +29,16 @@ from ..params import CONTACT_PAIRS, ModelParams
 from .stepping import step_split
 
 #: Length of the restraint constraints (m): the anchor's distance behind the
-#: point.  A sideways motion s changes the distance by s^2 / (2 L) (1 cm:
-#: 25 um), and tilts the constraint's direction by s / L (0.5%).
-CONSTRAINT_LENGTH_M = 2.0
+#: point.  A sideways motion s changes the distance by s^2 / (2 L) and tilts
+#: the constraint's direction by s / L; so does the offset a point settles at
+#: from its anchor (taken in the reference posture), and that tilt turns
+#: the constraint's damper into a cross-coupling: every lateral anchor lies
+#: on the same side, so it breaks the body's left-right symmetry.  At 2 m
+#: (a 5 mm offset: 0.25%) vertical excitation moved the trunk in roll
+#: 3e-4 of its pitch, which made the fit take noise-only paths for real
+#: ones; at 10 km the tilt is below 1e-6 and the coupling below 1e-6 of
+#: the real paths (the distance still resolved to 2e-12 m).
+CONSTRAINT_LENGTH_M = 1.0e4
 #: Stiffness of the restraint constraints (N/m): Drake requires one > 0; the
 #: restraint's spring is explicit (`ShearRestraints`), which also cancels
 #: this token one exactly, as it does the constraint's whole force at the

@@ -96,6 +96,7 @@ def execute_run(inputs: Mapping[str, Any]) -> dict[str, Any]:
     t0 = time.perf_counter()
     record: dict[str, Any] = {"host": socket.gethostname(), "pid": os.getpid()}
     try:
+        from ..diagram import on_design
         from ..model.anthropometry import BodyMeasures
         from ..params import params_from_dict
         from ..signals import make_seat_signal
@@ -105,6 +106,9 @@ def execute_run(inputs: Mapping[str, Any]) -> dict[str, Any]:
         measures = BodyMeasures(**inputs["body"])
         measures.validate()
         s = inputs["settings"]
+        # The run's design (expand_runs resolved "auto"); the implicit one at
+        # the step chosen by accuracy for this body, variant and parameters.
+        params = on_design(params, s.get("design"), None, measures, s["variant"])
         sim = params.simulation
         signal = make_seat_signal(s["excitation"], s["direction"], s["rms"], s["duration"],
                                   int(s["seed"]), sim.time_step_s, sim.settle_time_s,
@@ -117,6 +121,8 @@ def execute_run(inputs: Mapping[str, Any]) -> dict[str, Any]:
         wall = time.perf_counter() - t0
         summary["wall_s"] = wall
         summary["settle_wall_s"] = wall - summary["vibrate_wall_s"]
+        summary["design"] = sim.design
+        summary["time_step_s"] = sim.time_step_s
         record.update(status=STATUS_DONE, results=summary)
     except Exception as e:  # noqa: BLE001 - every model error is recorded, not raised
         record.update(status=STATUS_FAILED, error={

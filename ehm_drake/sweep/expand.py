@@ -93,6 +93,7 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
     run id and are computed once.
     """
     from ..model.anthropometry import BodyMeasures
+    from ..params import COMMAND_DESIGN
 
     spec = load_sweep_spec(spec)
     base = deep_merge(default_params_dict(), spec.params, "params")
@@ -101,6 +102,7 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
     seats: list[tuple[str | None, dict[str, Any]]] = list(spec.seats) or [(None, {})]
     mc = spec.monte_carlo
     samples: list[int | None] = list(range(mc.n)) if mc else [None]
+    stated = _states_stepping(spec)
     runs = []
     for (blabel, bvalues), combo, (slabel, svalues), sample in itertools.product(
             spec.bodies, grid_combos, seats, samples):
@@ -126,6 +128,10 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
                 value = _draw(rng, current, mc.vary[key])
                 _assign(key, value, params, body, settings)
                 swept[f"mc:{key}"] = value
+        if settings["design"] == "auto":
+            # As `simulate` chooses: a step or design the spec states is kept.
+            settings["design"] = (params["simulation"]["design"] if stated
+                                  else COMMAND_DESIGN)
         runs.append((swept, params, body, settings))
     out = []
     for i, (swept, params, body, settings) in enumerate(runs):
@@ -143,6 +149,19 @@ def expand_runs(spec: SweepSpec | Mapping[str, Any] | str | Path) -> list[RunSpe
             except ValueError as e:
                 raise SweepSpecError(f"run {run.index} ({_describe(run.swept)}): {e}") from None
     return out
+
+
+def _states_stepping(spec: SweepSpec) -> bool:
+    """Whether the spec states ``simulation.design`` or ``simulation.time_step_s``
+    (params_file, params, grid, seat or monte_carlo), as a parameter file does
+    for `ehm_drake.params.names_stepping`."""
+    named = set(spec.grid) | {k for _, s in spec.seats for k in s}
+    if spec.monte_carlo is not None:
+        named |= set(spec.monte_carlo.vary)
+    sim = spec.params.get("simulation")
+    if isinstance(sim, Mapping):
+        named |= {f"simulation.{k}" for k in sim}
+    return bool(named & {"simulation.design", "simulation.time_step_s"})
 
 
 def _describe(swept: Mapping[str, Any]) -> str:

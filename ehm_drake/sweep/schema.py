@@ -176,6 +176,9 @@ DIRECTIONS = ("x", "y", "z", "xyz")
 #: Excitation kinds a sweep can generate (a measured csv file is not portable to
 #: remote workers and is not offered).
 EXCITATIONS = ("random", "multisine", "sweep", "sine")
+#: Joint designs of a run: ``auto`` as the ``simulate`` command chooses
+#: (`ehm_drake.params.command_design`), or one by name.
+DESIGNS = ("auto", "implicit", "reference")
 
 
 def check_setting(name: str, value: Any, where: str) -> Any:
@@ -194,6 +197,10 @@ def check_setting(name: str, value: Any, where: str) -> Any:
 
         if value not in VARIANTS:
             raise SweepSpecError(f"{where}: variant must be one of {', '.join(VARIANTS)}, "
+                                 f"got {value!r}")
+    elif name == "design":
+        if value not in DESIGNS:
+            raise SweepSpecError(f"{where}: design must be one of {', '.join(DESIGNS)}, "
                                  f"got {value!r}")
     elif name == "seed":
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
@@ -288,6 +295,9 @@ class SpecFile:
     duration: float = _setting(60.0)
     seed: int = _setting(0)
     variant: str = _setting("default")
+    #: auto: the commands' default (the implicit design at the step chosen by
+    #: accuracy, unless the parameters state simulation.design or time_step_s).
+    design: str = _setting("auto")
     excitation: str = _setting("random")
     frequency_hz: float = _setting(4.0)
     params_file: str | None = spec_field(None, expect="a file name")

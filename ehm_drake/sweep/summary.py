@@ -37,8 +37,9 @@ def _flat_results(rec: dict[str, Any]) -> dict[str, Any]:
     for k in ("head_pitch_drift_deg", "trunk_T8_forward_drift_m", "back_in_contact"):
         if k in posture:
             row[k] = posture[k]
-    if "wall_s" in res:
-        row["wall_s"] = res["wall_s"]
+    for k in ("design", "time_step_s", "wall_s"):
+        if k in res:
+            row[k] = res[k]
     err = rec.get("error")
     if err:
         row["error_type"] = err.get("type")

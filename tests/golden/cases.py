@@ -27,7 +27,8 @@ SWEEP_SPEC = {
     "direction": "z",
     "seed": 2,
     "params": {"simulation": {"settle_time_s": 0.5, "onset_time_s": 0.5}},
-    "grid": {"pid.neck.kp": [[25.0, 22.0, 15.0], [30.0, 26.0, 18.0]]},
+    "grid": {"pid.neck.kp": [[25.0, 22.0, 15.0], [30.0, 26.0, 18.0]],
+             "design": ["auto", "reference"]},  # (auto: the implicit design at 5 ms)
 }
 
 #: (command name, argv after `ehm-drake`, output folder).  Run in order:
@@ -55,19 +56,21 @@ SUFFIXES = (".csv", ".json", ".md", ".npz", ".yaml")
 #: Keys whose values are clocks, not results (wall times, real-time
 #: factors, host names): replaced by a placeholder before comparing.
 VOLATILE = ("wall", "real_time_factor", "elapsed", "host", "utc", "timing", "seconds")
-#: Keys naming the process that ran a job.
+#: Keys naming the process that ran a job (at a record's top level: the
+#: parameters' ``pid`` group is a result).
 PROCESS = ("pid",)
 
 
-def _volatile(key: str) -> bool:
-    return key in PROCESS or any(v in key for v in VOLATILE)
+def _volatile(key: str, top: bool = False) -> bool:
+    return (top and key in PROCESS) or any(v in key for v in VOLATILE)
 
 
-def _scrub(obj):
+def _scrub(obj, top: bool = True):
     if isinstance(obj, dict):
-        return {k: ("<clock>" if _volatile(k) else _scrub(v)) for k, v in obj.items()}
+        return {k: ("<clock>" if _volatile(k, top) else _scrub(v, False))
+                for k, v in obj.items()}
     if isinstance(obj, list):
-        return [_scrub(v) for v in obj]
+        return [_scrub(v, False) for v in obj]
     return obj
 
 
