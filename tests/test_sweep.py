@@ -242,7 +242,7 @@ def test_monte_carlo_is_seeded_and_reproducible():
 
 
 def local_spec():
-    return spec_with(name="neck-gains", grid={"his.kp": [*GOOD_KP, DIVERGING_KP]})
+    return spec_with(name="his-gains", grid={"his.kp": [*GOOD_KP, DIVERGING_KP]})
 
 
 @pytest.fixture(scope="module")
@@ -331,7 +331,7 @@ def test_resume_recomputes_only_missing_runs(local_sweep, tmp_path):
 def test_dask_cluster_runs_the_same_sweep(local_sweep, tmp_path):
     distributed = pytest.importorskip("distributed")
     result, _, _ = local_sweep
-    spec = spec_with(name="neck-gains", grid={"his.kp": GOOD_KP})
+    spec = spec_with(name="his-gains", grid={"his.kp": GOOD_KP})
     with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                                   dashboard_address=None) as cluster:
         dask_result = run_sweep(spec, tmp_path / "dask", scheduler=cluster.scheduler_address,
