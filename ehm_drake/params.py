@@ -611,6 +611,11 @@ def with_design(params: ModelParams, design: str | None = None,
 COMMAND_DESIGN = "implicit"
 
 
+#: The ``simulation`` keys that choose how a model is stepped: a file (or a
+#: sweep spec) that states one keeps its design (`names_stepping`).
+STEPPING_KEYS = ("design", "time_step_s")
+
+
 def names_stepping(path: str | Path | None) -> bool:
     """Whether the parameter file at `path` states ``simulation.design`` or
     ``simulation.time_step_s`` (None: the packaged defaults, which the
@@ -620,7 +625,7 @@ def names_stepping(path: str | Path | None) -> bool:
         return False
     data = read_params_mapping(resolve_params_path(path))
     sim = data.get("simulation")
-    return isinstance(sim, dict) and ("design" in sim or "time_step_s" in sim)
+    return isinstance(sim, dict) and any(k in sim for k in STEPPING_KEYS)
 
 
 def command_design(path: str | Path | None, design: str | None) -> str | None:

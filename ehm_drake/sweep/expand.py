@@ -158,10 +158,12 @@ def _states_stepping(spec: SweepSpec) -> bool:
     named = set(spec.grid) | {k for _, s in spec.seats for k in s}
     if spec.monte_carlo is not None:
         named |= set(spec.monte_carlo.vary)
+    from ..params import STEPPING_KEYS
+
     sim = spec.params.get("simulation")
     if isinstance(sim, Mapping):
         named |= {f"simulation.{k}" for k in sim}
-    return bool(named & {"simulation.design", "simulation.time_step_s"})
+    return any(f"simulation.{k}" in named for k in STEPPING_KEYS)
 
 
 def _describe(swept: Mapping[str, Any]) -> str:

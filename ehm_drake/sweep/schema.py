@@ -176,9 +176,6 @@ DIRECTIONS = ("x", "y", "z", "xyz")
 #: Excitation kinds a sweep can generate (a measured csv file is not portable to
 #: remote workers and is not offered).
 EXCITATIONS = ("random", "multisine", "sweep", "sine")
-#: Joint designs of a run: ``auto`` as the ``simulate`` command chooses
-#: (`ehm_drake.params.command_design`), or one by name.
-DESIGNS = ("auto", "implicit", "reference")
 
 
 def check_setting(name: str, value: Any, where: str) -> Any:
@@ -199,8 +196,12 @@ def check_setting(name: str, value: Any, where: str) -> Any:
             raise SweepSpecError(f"{where}: variant must be one of {', '.join(VARIANTS)}, "
                                  f"got {value!r}")
     elif name == "design":
-        if value not in DESIGNS:
-            raise SweepSpecError(f"{where}: design must be one of {', '.join(DESIGNS)}, "
+        from ..params import CHOICES
+
+        # auto: as the ``simulate`` command chooses (`params.command_design`).
+        designs = ("auto", *CHOICES["simulation.design"])
+        if value not in designs:
+            raise SweepSpecError(f"{where}: design must be one of {', '.join(designs)}, "
                                  f"got {value!r}")
     elif name == "seed":
         if isinstance(value, bool) or not isinstance(value, int) or value < 0:
