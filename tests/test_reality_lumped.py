@@ -301,7 +301,8 @@ def test_the_reality_imports_nothing_of_the_model():
                 assert m.split(".")[0] in {"ehm_drake", "numpy", "scipy", "pydrake", "math",
                                            "time", "dataclasses", "typing", "__future__"}, m
                 if m.startswith("ehm_drake"):
-                    assert m in ("ehm_drake.realities", "ehm_drake.signals") or \
+                    # (ehm_drake.jit: numba's switch, no model code)
+                    assert m in ("ehm_drake.realities", "ehm_drake.signals", "ehm_drake.jit") or \
                         m.startswith("ehm_drake.realities.lumped"), m
 
 
@@ -374,3 +375,56 @@ def test_vertical_resonance_falls_with_level_as_seated_people_do(reality, subjec
     soft = reality.prepare(subject, {"softening": reality.effect_values("softening", 1.0)})
     g3, g6 = (_pelvis_z_resonance(soft, a) for a in (0.3, 0.6))
     assert g6 / g3 <= 0.87 and g6 / g3 <= f6 / f3 - 0.04, (f3, f6, g3, g6)
+
+
+@pytest.mark.skipif(not __import__("ehm_drake.jit", fromlist=["available"]).available(),
+                    reason="numba is not installed: the NumPy law alone runs")
+@pytest.mark.parametrize("effects", [(), ("seat_foam_stiffening", "softening"),
+                                     ("seat_cushion_dynamics", "arms")])
+def test_the_compiled_laws_are_the_numpy_laws(reality, subject, effects):
+    """The compiled step (`kernel.laws`) gives the NumPy law's forces,
+    torques, next bristle and Jenkins states and fed-back signals to 1e-12
+    at disturbed states near the seated one: on the fixed seat, with the
+    foam hardening and the tissue's Jenkins elements on, and with a moving
+    cushion (supports that move) and the hands on the thighs."""
+    from ehm_drake.realities.lumped import kernel
+    from ehm_drake.realities.lumped.plant import build
+    from ehm_drake.realities.lumped.simulate import _contexts
+
+    active = {name: reality.effect_values(name, 1.0) for name in effects}
+    prep = reality.prepare(subject, active)
+    built = build(prep.values, prep.effects, prep.h)
+    system, spec = built.system, built.spec
+    if "seat_foam_stiffening" in effects:
+        spec.c_kt0 = 1.5 * spec.c_k * np.sqrt(prep.seated_depth)
+        system.seated_depth, system.hardening = prep.seated_depth, 3.0e6
+    if "softening" in effects:
+        system.jenkins_k = 2.0e4 * (prep.seated_depth > 0)
+        system.jenkins_x = np.full(len(spec.c_body), 3e-4)
+        system.jenkins = True
+    assert spec.moving_supports == ("seat_cushion_dynamics" in effects)
+    rng = np.random.default_rng(7)
+    nq = spec.nq
+    checked = 0
+    for _ in range(5):
+        x = prep.x_plant.copy()
+        x[:nq] += rng.normal(0.0, 2e-3, nq)   # mm and mrad off the seated pose
+        x[nq:] += rng.normal(0.0, 0.05, spec.nv)
+        xd = prep.x_human + rng.normal(0.0, 1e-4, len(prep.x_human))
+        sim, root, pc, sc = _contexts(built, x, xd)
+        system.invalidate()
+        system._evaluate(sc)  # (fills the kinematics buffers)
+        a_seat = rng.normal(0.0, 1.0, 3)
+        ref = system._laws_numpy(x, xd, a_seat)
+        got = kernel.laws(system._R, system._p, system._w, system._v, x, xd, a_seat,
+                          *kernel.pack(system))
+        for name, a, b in zip(("tau", "T", "F", "z_next", "ej_next", "y", "f", "depth", "fn",
+                               "P"), ref, got, strict=True):
+            if a is None:
+                assert not system.jenkins and name == "ej_next"
+                continue
+            scale = max(float(np.max(np.abs(a))), 1.0)
+            assert np.max(np.abs(a - b)) <= 1e-12 * scale, name
+        # Contacts are loaded and sliding in these states (the laws' branches run).
+        checked += int(np.any(ref[8] > 0))
+    assert checked == 5

@@ -4,8 +4,10 @@ neuromuscular control and the seat's inertial load.
 Input ``state`` (the plant's [q; v]); outputs ``generalized_force`` (nv) and
 ``spatial_forces`` (a list of ExternallyAppliedSpatialForce, one per body
 with mass, applied at its mass centre).  Everything is computed once per
-time step in `_evaluate` (vectorized numpy over contacts and joint DoFs) and
-shared by both outputs and the discrete update.
+time step in `_evaluate` and shared by both outputs and the discrete
+update: the bodies' kinematics from the plant, then the laws below in one
+compiled call (`kernel.laws`, numba), or in NumPy over contacts and joint
+DoFs without numba (`_laws_numpy`, the reference: the same to rounding).
 
 Laws:
 
@@ -53,6 +55,7 @@ from pydrake.multibody.plant import ExternallyAppliedSpatialForce
 from pydrake.systems.framework import LeafSystem
 
 from .. import RealityError
+from .kernel import laws, pack
 
 #: Joint angle (rad) and pelvis excursion (m) beyond which a run is deemed
 #: to have diverged.
@@ -132,6 +135,7 @@ class LumpedHuman(LeafSystem):
         self._key = None
         self._out = None
         self._zero3 = np.zeros(3)
+        self._packed = None  # `kernel.pack`'s constants, made at the first evaluation
 
     # ------------------------------------------------------------------ run
     def start_log(self, n: int, positions: bool = False) -> None:
@@ -144,7 +148,10 @@ class LumpedHuman(LeafSystem):
             self.log["q"] = np.full((n, self.spec.nq), np.nan)
 
     def invalidate(self) -> None:
+        """Forget the last evaluation and the packed constants (after a
+        change of the per-run settings)."""
         self._key = None
+        self._packed = None
 
     # ---------------------------------------------------------- computation
     def _evaluate(self, context):
@@ -159,7 +166,7 @@ class LumpedHuman(LeafSystem):
         if not np.isfinite(x).all():
             raise RealityError(f"lumped: the state is not finite at t = {t:.3f} s "
                                "(the simulation diverged)")
-        q, v = x[:s.nq], x[s.nq:]
+        q = x[:s.nq]
         qa = q[s.dof_q]
         bad = np.abs(qa) > MAX_ANGLE
         if bad.any():
@@ -182,6 +189,40 @@ class LumpedHuman(LeafSystem):
         p[:-1] = X34[:, :, 3]
         w[:-1] = V6[:, :3]
         vv[:-1] = V6[:, 3:]
+        a_seat = self._zero3
+        if self.seat_acc is not None and k < len(self.seat_acc):
+            a_seat = self.seat_acc[k]
+        if laws is not None:
+            if self._packed is None:
+                self._packed = pack(self)
+            tau, T, F, z_next, ej_next, y, f, depth, fn, P = laws(R, p, w, vv, x, xd, a_seat,
+                                                                  *self._packed)
+            if not self.jenkins:
+                ej_next = None
+        else:
+            tau, T, F, z_next, ej_next, y, f, depth, fn, P = self._laws_numpy(x, xd, a_seat)
+        # ---- log
+        if self.log is not None and k < len(self.log["p"]):
+            mk = s.marker_kin
+            self.log["p"][k] = p[mk] + _rot(R[mk], s.marker_B)
+            self.log["R"][k] = R[mk]
+            self.log["support"][k] = s.A_support @ f
+            if "q" in self.log:
+                self.log["q"][k] = q
+        self._out = {"tau": tau, "T": T, "F": F, "z_next": z_next, "ej_next": ej_next, "y": y,
+                     "a_seat": a_seat, "f": f, "depth": depth, "fn": fn, "P": P}
+        self._key = key
+        return self._out
+
+    def _laws_numpy(self, x, xd, a_seat):
+        """The laws after the kinematics (the bodies' poses and velocities
+        in the buffers) in NumPy: (tau, T, F, z_next, ej_next, y, f, depth,
+        fn, P).  The reference of the compiled `kernel.laws` and its
+        fallback without numba."""
+        s = self.spec
+        q, v = x[:s.nq], x[s.nq:]
+        qa = q[s.dof_q]
+        R, p, w, vv = self._R, self._p, self._w, self._v
         # ---- contacts
         lay = self._layout
         cb = s.c_body
@@ -240,9 +281,6 @@ class LumpedHuman(LeafSystem):
         zn = np.sqrt(_dot(z_next, z_next))
         z_next *= (np.minimum(zn, zss) / np.maximum(zn, 1e-300))[:, None]
         # ---- forces per body (at its mass centre) incl. the inertial load
-        a_seat = self._zero3
-        if self.seat_acc is not None and k < len(self.seat_acc):
-            a_seat = self.seat_acc[k]
         com_W = p[:-1] + _rot(R[:-1], s.com_B)
         F = s.A_net @ f - np.outer(s.mass, a_seat)
         T = s.A_body @ _cross(P - s.A_body.T @ com_W, f)
@@ -261,18 +299,7 @@ class LumpedHuman(LeafSystem):
         Rh = R[s.head_kin] @ s.head_R0.T
         err = 0.5 * np.array([Rh[2, 1] - Rh[1, 2], Rh[0, 2] - Rh[2, 0], Rh[1, 0] - Rh[0, 1]])
         y = np.concatenate([qa, v[s.dof_v], err, w[s.head_kin]])
-        # ---- log
-        if self.log is not None and k < len(self.log["p"]):
-            mk = s.marker_kin
-            self.log["p"][k] = p[mk] + _rot(R[mk], s.marker_B)
-            self.log["R"][k] = R[mk]
-            self.log["support"][k] = s.A_support @ f
-            if "q" in self.log:
-                self.log["q"][k] = q
-        self._out = {"tau": tau, "T": T, "F": F, "z_next": z_next, "ej_next": ej_next, "y": y,
-                     "a_seat": a_seat, "f": f, "depth": depth, "fn": fn, "P": P}
-        self._key = key
-        return self._out
+        return tau, T, F, z_next, ej_next, y, f, depth, fn, P
 
     def _calc_tau(self, context, output):
         output.SetFromVector(self._evaluate(context)["tau"])
