@@ -135,7 +135,7 @@ class LumpedHuman(LeafSystem):
         self._key = None
         self._out = None
         self._zero3 = np.zeros(3)
-        self._packed = None  # `kernel.pack`'s constants, made at the first evaluation
+        self._packed = None  # (settings, `kernel.pack`'s constants), made when used
 
     # ------------------------------------------------------------------ run
     def start_log(self, n: int, positions: bool = False) -> None:
@@ -193,10 +193,13 @@ class LumpedHuman(LeafSystem):
         if self.seat_acc is not None and k < len(self.seat_acc):
             a_seat = self.seat_acc[k]
         if laws is not None:
-            if self._packed is None:
-                self._packed = pack(self)
+            # (packed again whenever a per-run setting is replaced)
+            settings = (self.hardening, self.jenkins, id(self.jenkins_k), id(self.jenkins_x),
+                        id(self.seated_depth), id(s.c_kt0))
+            if self._packed is None or self._packed[0] != settings:
+                self._packed = (settings, pack(self))
             tau, T, F, z_next, ej_next, y, f, depth, fn, P = laws(R, p, w, vv, x, xd, a_seat,
-                                                                  *self._packed)
+                                                                  *self._packed[1])
             if not self.jenkins:
                 ej_next = None
         else:
