@@ -26,8 +26,8 @@ design's own run at 1 ms (its step error alone), the worst bin's channel,
 and the paper's posture fact (head pitch after settling; the no-integrator
 variant drifts 6.4 +- 1 deg in the paper).
 
-`--protocol bar`: the accuracy bar's own protocol instead (issue "Fast by
-default"): separate 60 s runs in x and in z (seed 41), only the channels
+`--protocol bar`: the protocol the default design's accuracy bar is stated
+on instead: separate 60 s runs in x and in z (seed 41), only the channels
 head z, trunk z, head pitch, trunk x and pelvis x, bins with coherence > 0.9,
 0.5-12 Hz; bar: median <= 2 %, worst bin <= 10 % against the converged
 response.
