@@ -9,10 +9,10 @@ arrays of a dozen contacts and seventeen joints, which cost far more in
 NumPy's per-call overhead than in arithmetic (about 80% of this reality's
 step was Python).  `laws` evaluates the same formulas, contact by contact
 and joint by joint in the NumPy law's order, in one compiled call.  The
-NumPy law (`LumpedHuman._evaluate_numpy`) stays the reference and the
+NumPy law (`LumpedHuman._laws_numpy`) stays the reference and the
 fallback without numba; the two agree to rounding (their small matrix
 products sum in different orders; tests/test_reality_lumped.py compares
-them at random states to 1e-12).  No fast-math.
+them at disturbed states to 1e-12).  No fast-math.
 
 Packed inputs (built once per run by `pack`): a contact table of floats,
 one of indices, the body, joint and scalar tables; see `pack`.
@@ -79,7 +79,7 @@ if available():  # (called by the compiled kernel: compiled too)
 
 
 def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off, sc):
-    """`LumpedHuman._evaluate_numpy`'s laws after the kinematics: returns
+    """`LumpedHuman._laws_numpy`'s laws after the kinematics: returns
     (tau, T, F, z_next, ej_next, y, f, depth, fn, P); see the module
     docstring."""
     nc = C.shape[0]
