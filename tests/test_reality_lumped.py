@@ -17,6 +17,7 @@ import pytest
 import scipy.signal as ss
 from scipy.ndimage import gaussian_filter1d
 
+from ehm_drake import jit
 from ehm_drake.realities import CHANNEL_NAMES, RealityError, RealityRecord
 from ehm_drake.realities.lumped import LumpedReality
 from ehm_drake.realities.lumped import parameters as par
@@ -377,8 +378,8 @@ def test_vertical_resonance_falls_with_level_as_seated_people_do(reality, subjec
     assert g6 / g3 <= 0.87 and g6 / g3 <= f6 / f3 - 0.04, (f3, f6, g3, g6)
 
 
-@pytest.mark.skipif(not __import__("ehm_drake.jit", fromlist=["available"]).available(),
-                    reason="numba is not installed: the NumPy law alone runs")
+@pytest.mark.skipif(not jit.available(), reason="numba is not installed: the NumPy law "
+                                                "alone runs")
 @pytest.mark.parametrize("effects", [(), ("seat_foam_stiffening", "softening"),
                                      ("seat_cushion_dynamics", "arms")])
 def test_the_compiled_laws_are_the_numpy_laws(reality, subject, effects):
