@@ -36,4 +36,19 @@ def available() -> bool:
     return numba is not None
 
 
-__all__ = ["available", "kernel"]
+def _maximum(a, b):
+    """np.maximum of two floats (b when equal, NaN from a)."""
+    return a if (a > b or a != a) else b
+
+
+def _minimum(a, b):
+    """np.minimum of two floats (b when equal, NaN from a)."""
+    return a if (a < b or a != a) else b
+
+
+#: NumPy's elementwise maximum and minimum of two floats, for the kernels
+#: (compiled when the kernels are, so a kernel can call them).
+maximum = kernel(_maximum) or _maximum
+minimum = kernel(_minimum) or _minimum
+
+__all__ = ["available", "kernel", "maximum", "minimum"]

@@ -14,21 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..jit import available, kernel
-
-
-def _max(a, b):
-    """np.maximum of two floats (b when equal, NaN from a)."""
-    return a if (a > b or a != a) else b
-
-
-def _min(a, b):
-    """np.minimum of two floats (b when equal, NaN from a)."""
-    return a if (a < b or a != a) else b
-
-
-if available():  # (called by the compiled kernel below: compiled too)
-    _max, _min = kernel(_max), kernel(_min)
+from ..jit import available, kernel, maximum, minimum
 
 
 def _cardan_to_generalized(tau, ball, trig):
@@ -88,16 +74,16 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, 
             j = 2 * i + a
             fm = axis_prm[2, j]
             if friction:
-                fmu = axis_prm[3, j] * axis_prm[4, j] * _max(face - pos_n, 0.0)
+                fmu = axis_prm[3, j] * axis_prm[4, j] * maximum(face - pos_n, 0.0)
                 if axis_prm[3, j] > 0:
-                    fm = _min(fm, fmu)
+                    fm = minimum(fm, fmu)
             delta = PV[j] - slip[j]
-            f = _min(_max(-axis_prm[0, j] * delta - axis_prm[1, j] * VV[j], -fm), fm)
+            f = minimum(maximum(-axis_prm[0, j] * delta - axis_prm[1, j] * VV[j], -fm), fm)
             if gated_any:
                 f = f * (0.0 if free else 1.0)
             w[j] = f
             limit = fm / axis_prm[5, j]
-            new = slip[j] + (delta - _min(_max(delta, -limit), limit))
+            new = slip[j] + (delta - minimum(maximum(delta, -limit), limit))
             slip_next[j] = PV[j] if free else new
         if normal_terms:
             d = point_prm[3, i] - pos_n
@@ -125,7 +111,7 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, 
         pi = pid_prm[1, i] * e + pid_prm[2, i] * z[i]
         pid_torque[i] = pi + pid_prm[3, i] * x[rot_v_x[i]]
         pid_force[i] = pi + pid_prm[6, i] * x[rot_q[i]] if implicit_kp and not balls else pi
-        z_next[i] = _min(_max(z[i] + period * e, pid_prm[5, i]), pid_prm[4, i])
+        z_next[i] = minimum(maximum(z[i] + period * e, pid_prm[5, i]), pid_prm[4, i])
     passive = np.empty(q_index.shape[0])
     for i in range(q_index.shape[0]):
         q = x[q_index[i]]

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from ...jit import available, kernel
+from ...jit import kernel, maximum, minimum
 
 #: Columns of the contact table (`pack`).
 _PB, _NB, _OB = 0, 3, 6
@@ -64,18 +64,6 @@ def pack(system) -> tuple:
     return (C, CI, B, A, Jf, Ji, Sf, Si, np.ascontiguousarray(s.head_R0), off, sc)
 
 
-def _mx(a, b):
-    """np.maximum of two floats (NaN from a)."""
-    return a if (a > b or a != a) else b
-
-
-def _mn(a, b):
-    """np.minimum of two floats (NaN from a)."""
-    return a if (a < b or a != a) else b
-
-
-if available():  # (called by the compiled kernel: compiled too)
-    _mx, _mn = kernel(_mx), kernel(_mn)
 
 
 def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off, sc):
@@ -137,28 +125,28 @@ def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off,
                 N[r] = C[i, _NB + r]
             depth[i] = C[i, _ON] - (P[i, 0] * N[0] + P[i, 1] * N[1] + P[i, 2] * N[2])
         vn = Vr[0] * N[0] + Vr[1] * N[1] + Vr[2] * N[2]
-        d = _mx(depth[i], 0.0)
-        fn = C[i, _K] * d ** C[i, _N] * _mx(1.0 - 1.5 * C[i, _C] * vn, 0.0)
+        d = maximum(depth[i], 0.0)
+        fn = C[i, _K] * d ** C[i, _N] * maximum(1.0 - 1.5 * C[i, _C] * vn, 0.0)
         if hardening != 0.0:
             fn = fn + C[i, _FOAM] * C[i, _KT0] * hardening * (d - C[i, _SEATED]) ** 3.0 / 3.0
         if jenkins:
             ej = xd[j0 + i]
             fn = fn + C[i, _JK] * (ej - (d - C[i, _SEATED]))
-            ej_next[i] = _mn(_mx(ej - h * vn, -C[i, _JX]), C[i, _JX]) if depth[i] > 0.0 \
+            ej_next[i] = minimum(maximum(ej - h * vn, -C[i, _JX]), C[i, _JX]) if depth[i] > 0.0 \
                 else 0.0
-        fn = _mx(fn, 0.0)
+        fn = maximum(fn, 0.0)
         fn_out[i] = fn
         for r in range(3):
             vt[r] = Vr[r] - vn * N[r]
         limit = C[i, _MU] * fn
         zss = limit / C[i, _SK]
         zn = math.sqrt(z[0] * z[0] + z[1] * z[1] + z[2] * z[2])
-        zc = _mn(zn, zss)
-        scale = zc / _mx(zn, 1e-300)
+        zc = minimum(zn, zss)
+        scale = zc / maximum(zn, 1e-300)
         for r in range(3):
             z[r] = z[r] * scale
-        inv_zss = 1.0 / _mx(zss, 1e-12)
-        alpha = _mn(_mx((zc * inv_zss - stick) * inv_slide, 0.0), 1.0)
+        inv_zss = 1.0 / maximum(zss, 1e-12)
+        alpha = minimum(maximum((zc * inv_zss - stick) * inv_slide, 0.0), 1.0)
         if z[0] * vt[0] + z[1] * vt[1] + z[2] * vt[2] <= 0.0:
             alpha = 0.0
         gain = alpha * math.sqrt(vt[0] * vt[0] + vt[1] * vt[1] + vt[2] * vt[2]) * inv_zss
@@ -166,7 +154,7 @@ def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off,
             zdot[r] = vt[r] - gain * z[r]
             ft[r] = -(C[i, _SK] * z[r] + C[i, _SC] * zdot[r])
         ftn = math.sqrt(ft[0] * ft[0] + ft[1] * ft[1] + ft[2] * ft[2])
-        scale = _mn(ftn, limit) / _mx(ftn, 1e-300)
+        scale = minimum(ftn, limit) / maximum(ftn, 1e-300)
         for r in range(3):
             f[i, r] = fn * N[r] + ft[r] * scale
         den = 1.0 + h * gain
@@ -174,7 +162,7 @@ def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off,
             z_next[i, r] = (z[r] + h * vt[r]) / den
         zn = math.sqrt(z_next[i, 0] * z_next[i, 0] + z_next[i, 1] * z_next[i, 1]
                        + z_next[i, 2] * z_next[i, 2])
-        scale = _mn(zn, zss) / _mx(zn, 1e-300)
+        scale = minimum(zn, zss) / maximum(zn, 1e-300)
         for r in range(3):
             z_next[i, r] = z_next[i, r] * scale
     # Forces per body at its mass centre, the inertial load -m a.
@@ -213,7 +201,7 @@ def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off,
     sa = sc[_STIFF_ANGLE]
     for j in range(nd):
         dq = x[Ji[0, j]] - Jf[0, j]
-        ex = _mn(_mx((abs(dq) - Jf[1, j]) / sa, 0.0), 6.0)
+        ex = minimum(maximum((abs(dq) - Jf[1, j]) / sa, 0.0), 6.0)
         sgn = 1.0 if dq > 0.0 else (-1.0 if dq < 0.0 else 0.0)
         tau_el = -Jf[2, j] * (dq + sgn * sa * (math.expm1(ex) - ex))
         tau[Ji[1, j]] = tau_el + xd[a0 + j] + xd[t0 + j]

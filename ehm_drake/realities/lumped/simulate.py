@@ -163,7 +163,6 @@ def run(prep: Prepared, signal, positions: bool = False) -> RunOutput:
         system.seated_depth = d
         system.jenkins = True
     system.seat_acc = signal.acceleration
-    system.invalidate()  # (the settings above are packed at the first evaluation)
     n = signal.num_samples
     system.start_log(n, positions)
     t0 = time.perf_counter()

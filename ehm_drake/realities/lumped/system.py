@@ -193,10 +193,13 @@ class LumpedHuman(LeafSystem):
         if self.seat_acc is not None and k < len(self.seat_acc):
             a_seat = self.seat_acc[k]
         if laws is not None:
-            # (packed again whenever a per-run setting is replaced)
-            settings = (self.hardening, self.jenkins, id(self.jenkins_k), id(self.jenkins_x),
-                        id(self.seated_depth), id(s.c_kt0))
-            if self._packed is None or self._packed[0] != settings:
+            # Packed again whenever a per-run setting is replaced (the pack
+            # holds the objects it was made from, so none is reused unseen).
+            settings = (self.hardening, self.jenkins, self.jenkins_k, self.jenkins_x,
+                        self.seated_depth, s.c_kt0)
+            packed = self._packed
+            if packed is None or any(a is not b
+                                     for a, b in zip(settings, packed[0], strict=True)):
                 self._packed = (settings, pack(self))
             tau, T, F, z_next, ej_next, y, f, depth, fn, P = laws(R, p, w, vv, x, xd, a_seat,
                                                                   *self._packed[1])
