@@ -321,7 +321,8 @@ def build_diagram(
         builder.Connect(restraint_forces, forces.GetInputPort("restraint_forces"))
         sys["seat_forces"] = forces
     if guard:
-        g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(hp))
+        g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(
+            hp, level_ms2=0.0 if signal is None else signal.level()))
         builder.Connect(state, g.GetInputPort("state"))
         sys["divergence_guard"] = g
 

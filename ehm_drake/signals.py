@@ -84,6 +84,15 @@ class SeatSignal:
         part = self.acceleration[k0:]
         return np.sqrt(np.mean(part**2, axis=0)) if len(part) else np.zeros(3)
 
+    def level(self) -> float:
+        """One magnitude of the whole excitation (m/s^2): the RMS of the
+        acceleration vector over the full-amplitude part, or a third of the
+        vector's largest magnitude when that is more (a shock's peak, which
+        its RMS hides; a random signal's peaks stay within about 3-4.5 RMS)."""
+        a = self.acceleration
+        peak = float(np.sqrt(np.max(np.einsum("ij,ij->i", a, a)))) if len(a) else 0.0
+        return max(float(np.linalg.norm(self.rms())), peak / 3.0)
+
     def sample_index(self, t: float) -> int:
         k = int(math.floor(t / self.time_step + 1e-6))
         return min(max(k, 0), self.num_samples - 1)
