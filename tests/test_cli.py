@@ -280,3 +280,30 @@ def test_design_and_time_step_options(tmp_path, capsys):
                      str(tmp_path / "o"), "--quiet"])
         err = capsys.readouterr().err
         assert code == 2 and match in err and "Traceback" not in err, err
+
+
+def test_diagnosing_a_simulation_of_another_design_says_so(sim_dir, params, tmp_path):
+    """`diagnose` on a `simulate` folder (its summary.json names the design)
+    whose design is not the diagnosis's model's: a caution naming both and
+    the option that matches them; none when they match, when a design is
+    asked for, or for lab data (no summary.json)."""
+    import argparse
+
+    from ehm_drake.gap.commands import _design_caution
+    from ehm_drake.params import with_design
+
+    design = json.loads((sim_dir / "summary.json").read_text())["design"]
+    other = "reference" if design == "implicit" else "implicit"
+
+    def args(data, **kw):
+        return argparse.Namespace(data=str(data), design=kw.get("design"), time_step=None,
+                                  params=None)
+
+    text = _design_caution(args(sim_dir), with_design(params, other))
+    assert f"on the {design} design" in text and f"runs the {other} design" in text
+    assert text.endswith(f"--design {design}")
+    assert _design_caution(args(sim_dir), with_design(params, design)) is None
+    assert _design_caution(args(sim_dir, design=other), with_design(params, other)) is None
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    assert _design_caution(args(lab), with_design(params, other)) is None

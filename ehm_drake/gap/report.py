@@ -92,6 +92,8 @@ def markdown(rep: dict, figures: list[str]) -> str:
     lines = [f"# Sim-to-real gap diagnosis: **{rep['verdict']}**", ""]
     lines.append(rep.get("explanation", ""))
     lines.append("")
+    if rep.get("design_caution"):
+        lines += [f"Caution: {rep['design_caution']}.", ""]
     gb, ga = rep["gap_before"], rep["gap_after"]
     lines += ["## Gap (excess chi^2 per degree of freedom; 0 = within measurement noise)",
               "", "| | train | held-out |", "|---|---|---|",
