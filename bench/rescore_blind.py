@@ -29,6 +29,10 @@ reference subjects in those folders (a run's ``reference`` folder, or subject
 folders) instead of the run's own group: a change of the group (its size, its
 subjects) measured on the same trials, e.g. the run's 8 subjects and another
 run's 8 of the same reality and protocol.
+
+With ``--design implicit`` (a reality's run) the model is linearized on that
+design: the data, made by the reality, stay valid, so the diagnosis's figures
+on another design are measured on the same trials without simulating again.
 """
 
 from __future__ import annotations
@@ -99,6 +103,9 @@ def main(argv=None) -> int:
     p.add_argument("--better", action="store_true",
                    help="with --contrasts: each such effect's evidence is the larger of its "
                         "measured and its modelled signature's (the null likewise)")
+    p.add_argument("--design", choices=("reference", "implicit"), default=None,
+                   help="re-diagnose with the model on this design (default: the packaged "
+                        "parameters'); the data, made by a reality, do not depend on it")
     p.add_argument("--reference", type=Path, nargs="+", default=None,
                    help="diagnose against these reference folders instead of the run's own "
                         "group (re-diagnoses)")
@@ -112,6 +119,17 @@ def main(argv=None) -> int:
 
     settings = json.loads((args.run / "blind_settings.json").read_text())
     reality = settings.get("reality", MODEL_REALITY)
+    params = None
+    if args.design is not None:
+        if reality == MODEL_REALITY:
+            p.error("--design: the model's own trials were simulated on the run's design; "
+                    "re-diagnosing them on another compares two designs, not the diagnosis")
+        if args.rethreshold:
+            p.error("--design re-diagnoses; it cannot be combined with --rethreshold")
+        from ehm_drake.diagram import on_design
+        from ehm_drake.params import load_params
+
+        params = on_design(load_params(), args.design)
     candidates = settings.get("candidates")
     if args.rethreshold and not settings.get("references"):
         p.error("--rethreshold needs a run against a reference group")
@@ -159,12 +177,12 @@ def main(argv=None) -> int:
             rep = rethreshold(stored)
         elif group is not None:
             data = load_lab_data(rfile.parent / "data")
-            diag = diagnose_with_reference(data, group, effects=candidates,
+            diag = diagnose_with_reference(data, group, params, effects=candidates,
                                            workers=args.workers, progress=False)
             rep = diag.report
         else:
             data = load_lab_data(rfile.parent / "data")
-            rep = diagnose(data, effects=candidates, workers=args.workers,
+            rep = diagnose(data, params, effects=candidates, workers=args.workers,
                            progress=False).report
         sc = score(old["hidden"], rep, old["detectability"]["detectable"],
                    reality != MODEL_REALITY)

@@ -506,6 +506,10 @@ def fit(frf: FrfData, start: ModelParams | None = None, free: str | list | None 
                    "fit_wall_s": t_fit, "n_model_evaluations": tracker.n,
                    "free": [fp.name for fp in free_params], "variant": variant,
                    "data_rows_used": len(res.row_f),
+                   # "direction/segment/dof" of the paths left out as zero by
+                   # the model's symmetry (the time-domain check leaves them out too).
+                   "zero_paths": sorted(f"{d}/{c.rsplit('_', 1)[0]}/{c.rsplit('_', 1)[1]}"
+                                        for d, c in zero),
                    "starts": [{"start": name, "cost": own[0], "scales": np.exp(x).tolist()}
                               for x, name, own in ends],
                    "descents": descents,

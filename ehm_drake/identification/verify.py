@@ -11,18 +11,24 @@ import numpy as np
 from ..analysis.formats import FrfData
 from ..model.anthropometry import REFERENCE, BodyMeasures
 from ..params import ModelParams
+from .evaluation import _level_key, path_shares
 from .fit import FitResult
 
 
 def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
                        measures: BodyMeasures = REFERENCE, variant: str = "default",
                        duration: float = 60.0, seed: int = 1, timeseries=None,
-                       progress: bool = False) -> dict:
+                       progress: bool = False, leave_out=()) -> dict:
     """Simulate the measured excitation with `params` (nonlinear, time
     domain), estimate the transmissibility as a lab would, and compare it
     with the data.  The excitation is the recorded seat acceleration when
     `timeseries` is given, else random 0.1-12 Hz per measured direction at
-    the measured level.  Fails on divergence, lost posture or instability."""
+    the measured level.  Fails on divergence, lost posture or instability.
+    `leave_out`: "direction/segment/dof" paths kept out of the error (the
+    fit's `zero_paths`: with simultaneous axes their data and simulation are
+    both estimation noise, which would dominate it).  Per direction: the RMS
+    log-gain error per channel, and over all rows weighted by each path's
+    share of its output (as the fit weighs them)."""
     from ..analysis.transmissibility import transmissibility
     from ..signals import make_seat_signal, signal_from_samples
     from ..simulation import EquilibriumError, SimulationDiverged, settle, vibrate
@@ -49,6 +55,7 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
             level = float(np.nanmedian(levels)) if np.isfinite(levels).any() else 0.1941
             runs[d] = make_seat_signal("random", d, level, duration, seed, s.time_step_s,
                                        s.settle_time_s, s.onset_time_s)
+    shares = path_shares(frf)
     for label, sig in runs.items():
         try:
             run = vibrate(params, settled, sig, measures, variant, progress=progress)
@@ -59,19 +66,35 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
             continue
         est = transmissibility(run.after(sig.steady_start).to_timeseries())
         errs = {}
+        left_out = set(leave_out)
+        sum_we2 = sum_w = 0.0
         for key in est.channels():
             d, seg, dof = key[:3]
-            f, g, _, coh = frf.get(d, seg, dof) if len(frf.select(d, seg, dof)) else ([],) * 4
-            if len(f) == 0:
+            if f"{d}/{seg}/{dof}" in left_out:
                 continue
+            rows = frf.select(d, seg, dof)
+            if len(rows) == 0:
+                continue
+            f, g, _, coh = frf.get(d, seg, dof)
             ef, eg, _, ecoh = est.get(d, seg, dof)
             gi = np.interp(f, ef, eg)
             ok = (coh > 0.5) & (np.interp(f, ef, ecoh) > 0.5) & (g > 0) & (gi > 0)
             if ok.sum() > 3:
-                errs[f"{d}/{seg}/{dof}"] = float(np.sqrt(np.mean(np.log(gi[ok] / g[ok]) ** 2)))
+                e2 = np.log(gi[ok] / g[ok]) ** 2
+                errs[f"{d}/{seg}/{dof}"] = float(np.sqrt(np.mean(e2)))
+                lv = _level_key(float(rows.level_rms[0]))
+                w = np.array([shares.get((d, seg, dof, round(float(fi), 9), lv), 1.0)
+                              for fi in f[ok]])
+                sum_we2 += float(w @ e2)
+                sum_w += float(w.sum())
+        # The summary weighs each row by its path's share of the output (1 for
+        # one axis at a time): a small cross-axis path beside a large one is
+        # mostly estimation noise there, as the fit weighs it (`path_shares`).
         out["directions"][label] = {
-            "excitation": sig.description, "rms_log_gain_error": float(np.mean(list(
-                errs.values()))) if errs else None, "per_channel": errs,
+            "excitation": sig.description,
+            "rms_log_gain_error": float(np.sqrt(sum_we2 / sum_w)) if sum_w > 0 else None,
+            "per_channel": errs,
+            "paths_left_out": len(left_out & {"/".join(k[:3]) for k in est.channels()}),
             "real_time_factor": run.meta["real_time_factor"]}
     return out
 
@@ -83,6 +106,7 @@ def safe_parameters(result: FitResult, frf: FrfData, verify, **kw):
     from .parameters import apply_scales
 
     x = np.log(result.scales)
+    kw.setdefault("leave_out", result.report.get("zero_paths", ()))
     last = None
     for frac in (1.0, 0.5, 0.25, 0.0):
         params = apply_scales(result.start, result.free, np.exp(frac * x))
