@@ -247,10 +247,28 @@ def _print_summary(summary: dict) -> None:
           f"{summary['backrest_force_n']['total']:.0f} N")
     peaks = summary.get("transmissibility_peaks", {})
     if peaks:
-        print("transmissibility peaks, gain (m/m or deg/m) @ frequency (Hz):")
-        for key, v in peaks.items():
-            if v["peak_gain"] > 0.05:
-                print(f"  {key:24s} {v['peak_gain']:8.3f} @ {v['peak_freq_hz']:5.2f}")
+        shown = {k: v for k, v in peaks.items()
+                 if v["peak_gain"] > 0.05 and not _zero_by_symmetry(k)}
+        hidden = sum(v["peak_gain"] > 0.05 and _zero_by_symmetry(k) for k, v in peaks.items())
+        print("transmissibility peaks, gain (m/m or deg/m) @ frequency (Hz)"
+              + (f"; {hidden} paths zero by the body's left-right symmetry left out (with axes "
+                 "excited together their estimates are noise)" if hidden else "") + ":")
+        for key, v in shown.items():
+            print(f"  {key:24s} {v['peak_gain']:8.3f} @ {v['peak_freq_hz']:5.2f}")
+
+
+#: Per excited axis, the motions of the midline segments that the body's
+#: left-right symmetry makes zero (fore-aft and vertical excite no lateral,
+#: roll or yaw motion; lateral excites no fore-aft, vertical or pitch motion).
+_ANTISYMMETRIC = {"x": ("y", "roll", "yaw"), "z": ("y", "roll", "yaw"),
+                  "y": ("x", "z", "pitch")}
+_MIDLINE = ("pelvis", "trunk", "head")
+
+
+def _zero_by_symmetry(key: str) -> bool:
+    """Whether the path "direction/segment/dof" is zero by symmetry."""
+    d, seg, dof = key.split("/")
+    return seg in _MIDLINE and dof in _ANTISYMMETRIC.get(d, ())
 
 
 # ---------------------------------------------------------------------------

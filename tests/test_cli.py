@@ -308,3 +308,25 @@ def test_diagnosing_a_simulation_of_another_design_says_so(sim_dir, params, tmp_
     lab.mkdir()
     assert _design_caution(args(lab), with_design(params, other)) is None
 
+
+
+def test_the_paths_the_summary_leaves_out_are_zero_in_the_model(params):
+    """The printed summary leaves out the midline segments' paths that the
+    body's left-right symmetry makes zero (with axes excited together their
+    estimates are noise): in the linearized model those are zero to 1e-6 of
+    the largest gain of their kind, and every other midline path is not."""
+    from ehm_drake.analysis.linear import linearize
+    from ehm_drake.cli import _zero_by_symmetry
+    from ehm_drake.diagram import build_diagram
+
+    frf = linearize(build_diagram(params)).transmissibility(np.linspace(0.5, 12.0, 24))
+    peak = {}
+    for key in frf.channels():
+        peak["/".join(key[:3])] = float(np.max(frf.get(*key[:3])[1]))
+    for kind in (("x", "y", "z"), ("roll", "pitch", "yaw")):
+        largest = max(v for k, v in peak.items() if k.split("/")[2] in kind)
+        for key, v in peak.items():
+            d, seg, dof = key.split("/")
+            if dof not in kind or seg not in ("pelvis", "trunk", "head"):
+                continue
+            assert (v < 1e-6 * largest) == _zero_by_symmetry(key), (key, v / largest)
