@@ -257,8 +257,9 @@ class DivergenceGuard(LeafSystem):
     PERIOD_S = 0.05
 
     def __init__(self, hp, period: float = PERIOD_S, level_ms2: float = 0.0):
-        """`level_ms2`: the excitation's level (`excitation_level`), which
-        raises the kinetic-energy limit beyond 1 m/s^2 (`energy_limit`)."""
+        """`level_ms2`: the excitation's level (`SeatSignal.level`; 0 for a
+        body at rest), which raises the kinetic-energy limit beyond 1 m/s^2
+        (`energy_limit`)."""
         super().__init__()
         self._hp = hp
         self.max_kinetic_energy_j = self.energy_limit(level_ms2)
