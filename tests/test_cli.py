@@ -309,7 +309,6 @@ def test_diagnosing_a_simulation_of_another_design_says_so(sim_dir, params, tmp_
     assert _design_caution(args(lab), with_design(params, other)) is None
 
 
-
 def test_the_paths_the_summary_leaves_out_are_zero_in_the_model(params):
     """The printed summary leaves out the midline segments' paths that the
     body's left-right symmetry makes zero (with axes excited together their

@@ -2,8 +2,8 @@
 time simulation at small amplitude (modal issue acceptance): the
 equivalent-linear model at the test's level, since the body softens with
 its movement (`ehm_drake.model.softening`), both on the commands' default
-(implicit) design; the paper's reference design gives the same errors
-within 0.5% (docs/history/2026-12-05-guard-levels-checks-lumped-group.md).
+(implicit) design (the paper's reference design passes with errors as small:
+docs/history/2026-12-05-guard-levels-checks-lumped-group.md).
 
 The seat signal is a multisine (0.05 Hz grid, 0.1-12 Hz, seeded phases,
 0.05 m/s^2 RMS, 60 s): its 20 s period makes the H1 estimate over whole
