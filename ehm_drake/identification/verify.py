@@ -56,6 +56,7 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
             runs[d] = make_seat_signal("random", d, level, duration, seed, s.time_step_s,
                                        s.settle_time_s, s.onset_time_s)
     shares = path_shares(frf)
+    left_out = set(leave_out)
     for label, sig in runs.items():
         try:
             run = vibrate(params, settled, sig, measures, variant, progress=progress)
@@ -66,7 +67,6 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
             continue
         est = transmissibility(run.after(sig.steady_start).to_timeseries())
         errs = {}
-        left_out = set(leave_out)
         sum_we2 = sum_w = 0.0
         for key in est.channels():
             d, seg, dof = key[:3]
@@ -75,7 +75,7 @@ def verify_time_domain(params: ModelParams, frf: FrfData, directions: str,
             rows = frf.select(d, seg, dof)
             if len(rows) == 0:
                 continue
-            f, g, _, coh = frf.get(d, seg, dof)
+            f, g, _, coh = rows.get(d, seg, dof)
             ef, eg, _, ecoh = est.get(d, seg, dof)
             gi = np.interp(f, ef, eg)
             ok = (coh > 0.5) & (np.interp(f, ef, ecoh) > 0.5) & (g > 0) & (gi > 0)

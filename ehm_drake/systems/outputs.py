@@ -273,8 +273,12 @@ class DivergenceGuard(LeafSystem):
         self.DeclarePeriodicPublishEvent(period, 0.0, self._check)
         self._q_owner = {}
         self._v_owner = {}
-        for j in range(plant.num_joints()):
-            joint = plant.get_joint(JointIndex(j))
+        joints = [plant.get_joint(JointIndex(j)) for j in range(plant.num_joints())]
+        #: The bodies each body carries (by index), to walk a joint chain.
+        self._children = {}
+        for joint in joints:
+            self._children.setdefault(joint.parent_body().index(), []).append(joint.child_body())
+        for joint in joints:
             segment = self._segment_of(joint.child_body()).name()
             for k in range(joint.num_positions()):
                 self._q_owner[joint.position_start() + k] = segment
@@ -300,15 +304,11 @@ class DivergenceGuard(LeafSystem):
     def _segment_of(self, body):
         """`body`, or for a massless link of a joint chain the segment at the
         chain's end (the first body below it with a mass)."""
-        plant = self._hp.plant
-        seen = 0
-        while body.default_mass() < self.MIN_SEGMENT_MASS_KG and seen < plant.num_bodies():
-            below = [plant.get_joint(JointIndex(j)).child_body()
-                     for j in range(plant.num_joints())
-                     if plant.get_joint(JointIndex(j)).parent_body().index() == body.index()]
+        while body.default_mass() < self.MIN_SEGMENT_MASS_KG:
+            below = self._children.get(body.index(), [])
             if len(below) != 1:
                 break
-            body, seen = below[0], seen + 1
+            body = below[0]
         return body
 
     def _fastest_body(self, ctx) -> str:

@@ -64,8 +64,6 @@ def pack(system) -> tuple:
     return (C, CI, B, A, Jf, Ji, Sf, Si, np.ascontiguousarray(s.head_R0), off, sc)
 
 
-
-
 def _laws(R, p, w, vv, x, xd, a_seat, C, CI, B, A, Jf, Ji, Sf, Si, head_R0, off, sc):
     """`LumpedHuman._laws_numpy`'s laws after the kinematics: returns
     (tau, T, F, z_next, ej_next, y, f, depth, fn, P); see the module
