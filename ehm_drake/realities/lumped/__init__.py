@@ -9,11 +9,12 @@ revolute knees.  Anthropometry: Dempster's segment data as tabulated by
 Winter, Drillis & Contini's length fractions, Pheasant's seated dimensions
 (50th-percentile male, 77 kg, 1.75 m).  Passive joints: neutral zone plus
 exponential stiffening, viscous damping.  Seat: Hunt-Crossley point contact
-(n = 1.5) at the ischial tuberosities, thighs, lumbar and upper back (two
-pads) and heels and balls of the feet, with elasto-plastic (regularized
-Coulomb) shear.  Control: delayed (20 ms) PD of the joint angles through
-first-order activation (40 ms), a vestibular head-in-space term on the
-neck, and a tonic torque adapted while the subject settles.  The seat moves
+(n = 1.5) at the ischial tuberosities and beside them under the buttocks,
+thighs, lumbar and upper back (two pads) and heels and balls of the feet,
+with elasto-plastic (regularized Coulomb) shear.  Control: delayed (20 ms)
+PD of the joint angles through first-order activation (40 ms), a
+vestibular head-in-space term on the neck, and a tonic torque adapted
+while the subject settles.  The seat moves
 the body through the inertial load -m a_seat on every body in the seat frame.
 
 All values with their sources: `parameters.PARAMETERS`; the effects' own

@@ -103,7 +103,7 @@ class ContactDef:
     body: str
     p_B: np.ndarray
     support: str  # pan, floor, lower_pad, upper_pad, thigh_l/r (hands)
-    group: str  # it, thigh, back, foot, hand
+    group: str  # it, buttock, thigh, back, foot, hand
 
 
 @dataclass
@@ -215,7 +215,10 @@ def make_plan(v: dict, arms: dict | None = None, viscera_kg: float = 0.0) -> Bod
                    # makes it), 12 mm into it like the tuberosities.
                    f"thigh_pt_{side}": np.array([*(h + 0.45 * L_thigh * e_thigh)[:2],
                                                  -0.012]),
-                   f"it_{side}": np.array([0.0, sgn * v["it_width"] / 2, -it_drop])})
+                   f"it_{side}": np.array([0.0, sgn * v["it_width"] / 2, -it_drop]),
+                   # The buttock's tissue beside the tuberosity, at its depth.
+                   f"buttock_{side}": np.array([0.0, sgn * v["buttock_contact_width"] / 2,
+                                                -it_drop])})
         feet_z.append(lm[f"heel_{side}"][2])
     # Arms: upper arm hanging from the shoulder, forearm forward and down to
     # the hand resting on the thigh.
@@ -295,6 +298,7 @@ def make_plan(v: dict, arms: dict | None = None, viscera_kg: float = 0.0) -> Bod
     contacts = []
     for side, sgn in (("l", 1.0), ("r", -1.0)):
         contacts.append(ContactDef(f"it_{side}", "pelvis", None, "pan", "it"))
+        contacts.append(ContactDef(f"buttock_{side}", "pelvis", None, "pan", "buttock"))
         contacts.append(ContactDef(f"thigh_{side}", f"thigh_{side}", None, "pan", "thigh"))
         for pt in ("heel", "ball"):
             contacts.append(ContactDef(f"{pt}_{side}", f"shank_{side}", None, "floor", "foot"))
@@ -302,8 +306,8 @@ def make_plan(v: dict, arms: dict | None = None, viscera_kg: float = 0.0) -> Bod
         lm[f"upper_back_{side}"] = c7 - 0.10 * e_sp - 0.09 * e_ant + sgn * 0.07 * Y
         contacts.append(ContactDef(f"lumbar_back_{side}", "abdomen", None, "lower_pad", "back"))
         contacts.append(ContactDef(f"upper_back_{side}", "thorax", None, "upper_pad", "back"))
-    pts = {"it": "it", "thigh": "thigh_pt", "heel": "heel", "ball": "ball",
-           "lumbar_back": "lumbar_back", "upper_back": "upper_back"}
+    pts = {"it": "it", "buttock": "buttock", "thigh": "thigh_pt", "heel": "heel",
+           "ball": "ball", "lumbar_back": "lumbar_back", "upper_back": "upper_back"}
     for c in contacts:
         kind, side = c.name.rsplit("_", 1)
         c.p_B = lm[f"{pts[kind]}_{side}"]  # in S until converted below

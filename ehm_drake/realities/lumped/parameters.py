@@ -165,6 +165,20 @@ PARAMETERS: dict[str, P] = {
                          "(Reed)", "length"),
     "hjc_width": P(0.17, "m", "inter-hip-joint distance of men 0.16-0.18 m"),
     "it_width": P(0.12, "m", "inter-tuberosity distance of men 0.10-0.13 m"),
+    "buttock_contact_width": P(0.27, "m", "span between the two lateral buttock contacts: "
+                               "the seated buttocks bear load across the hip breadth sitting "
+                               "(360 mm, Pheasant) less their rounded sides, each side's "
+                               "lateral point at 3/8 of it from the midline; with the "
+                               "tuberosity points the load has the second moment of a "
+                               "contact from the tuberosity to the buttock's side, which "
+                               "gives the pelvis its roll support on the pan"),
+    "buttock_share": P(0.5, "-", "share of each side's pan tissue (stiffness, shear "
+                       "stiffness and damping) at the lateral buttock point, the rest under "
+                       "the tuberosity: no "
+                       "source for the split; a pressure map peaks under the tuberosities "
+                       "and spreads over the buttocks, and the equal split keeps the "
+                       "vertical and fore-aft laws of one point per side (the same total "
+                       "at the same depth)"),
     "l4l5_behind_hjc": P(0.075, "m", "L4-L5 disc ~7-8 cm posterior of the hip joints when "
                          "seated (Reed)", "length"),
     "l4l5_above_hjc": P(0.12, "m", "L4-L5 disc ~12 cm above the hip joints when seated (Reed)",
@@ -189,7 +203,8 @@ PARAMETERS: dict[str, P] = {
     "foot_preload_mm": P(2.0, "mm", "footrest height adjusted so the feet bear the lower legs"),
     # --- contact: Hunt-Crossley F = k d^n (1 + 1.5 c d'), n = 1.5 ------------
     "hc_exponent": P(1.5, "-", "Hertz-like exponent of soft-tissue indentation (Hunt-Crossley)"),
-    "k_it": P(1.6e5, "N/m^1.5", "buttock tissue under each tuberosity: ~210 N at ~12 mm "
+    "k_it": P(1.6e5, "N/m^1.5", "buttock tissue of each side (its tuberosity and lateral "
+              "points together, `buttock_share`): ~210 N at ~12 mm "
               "compression, tangent ~26 kN/m per side (Todd-Thacker indentation; the seated "
               "body's vertical resonance near 5 Hz, Fairley-Griffin)", "stiffness"),
     "k_thigh": P(1.0e5, "N/m^1.5", "thigh underside on the pan: ~105 N at ~10 mm, tangent "

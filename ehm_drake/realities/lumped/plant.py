@@ -32,6 +32,7 @@ PAN_SHARE = 0.75
 #: friction coefficient key; foam hardening applies).
 _GROUPS = {
     "it": ("k_it", "c_it", "shear_k_it", "shear_c_it", "mu_seat", True),
+    "buttock": ("k_it", "c_it", "shear_k_it", "shear_c_it", "mu_seat", True),
     "thigh": ("k_thigh", "c_thigh", "shear_k_thigh", "shear_c_thigh", "mu_seat", True),
     "back": ("k_back", "c_back", "shear_k_back", "shear_c_back", "mu_seat", True),
     "foot": ("k_foot", "c_foot", "shear_k_foot", "shear_c_foot", "mu_floor", False),
@@ -248,16 +249,21 @@ def build(v: dict, effects: dict, h: float) -> Built:
             jenkins.append(0.0)
         else:
             kk, cc, ss, sd, mk, fm = _GROUPS[cd.group]
-            k.append(v[kk])
+            # Each side's pan tissue split between its tuberosity and buttock
+            # points (Hunt-Crossley damping is per unit of force: not split).
+            share = {"it": 1.0 - v["buttock_share"], "buttock": v["buttock_share"]}.get(
+                cd.group, 1.0)
+            k.append(share * v[kk])
             c.append(v[cc])
-            sk.append(v[ss])
-            sc.append(v[sd])
+            sk.append(share * v[ss])
+            sc.append(share * v[sd])
             mu.append(mu_seat if mk == "mu_seat" else v[mk])
             foam.append(1.0 if fm else 0.0)
             # Tissue friction under the pelvis and thighs (the seat-pan
             # tissue; not the back pads' foam nor the heel pads).
-            jenkins.append(1.0 if cd.group in ("it", "thigh") else 0.0)
-            part = {"it": "pan", "thigh": "pan", "foot": "floor", "back": "back"}[cd.group]
+            jenkins.append(1.0 if cd.group in ("it", "buttock", "thigh") else 0.0)
+            part = {"it": "pan", "buttock": "pan", "thigh": "pan", "foot": "floor",
+                    "back": "back"}[cd.group]
             A_support[SUPPORTS.index(part), i] = 1.0
         n_exp.append(v["hc_exponent"])
     A_body = np.zeros((nk, nc))
