@@ -385,6 +385,8 @@ def test_a_body_off_the_backrest_stays_seated_under_lateral_vibration(reality, s
     narrow = prepare({**values, "buttock_share": 0.01}, effects, reality.time_step)
     with pytest.raises(RealityError, match="pelvis moved"):
         run(narrow, sig)
+    with pytest.raises(RealityError, match="buttock_share"):
+        prepare({**values, "buttock_share": 0.0}, effects, reality.time_step)
 
 
 @pytest.mark.slow

@@ -19,6 +19,7 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import DiagramBuilder
 
+from .. import RealityError
 from .body import BodyPlan, make_plan
 from .system import LumpedHuman, StateLayout
 
@@ -126,6 +127,9 @@ def _inertia(seg):
 
 def build(v: dict, effects: dict, h: float) -> Built:
     """The diagram for parameter values `v` and effects {name: values}."""
+    if not 0.0 < v["buttock_share"] < 1.0:
+        raise RealityError(f"lumped: buttock_share must be in (0, 1) (each side's pan tissue "
+                           f"at its tuberosity and buttock points), got {v['buttock_share']!r}")
     arms = None
     if "arms" in effects:
         e = effects["arms"]
