@@ -14,8 +14,8 @@ thighs, lumbar and upper back (two pads) and heels and balls of the feet,
 with elasto-plastic (regularized Coulomb) shear.  Control: delayed (20 ms)
 PD of the joint angles through first-order activation (40 ms), a
 vestibular head-in-space term on the neck, and a tonic torque adapted
-while the subject settles.  The seat moves
-the body through the inertial load -m a_seat on every body in the seat frame.
+while the subject settles.  The seat moves the body through the inertial
+load -m a_seat on every body in the seat frame.
 
 All values with their sources: `parameters.PARAMETERS`; the effects' own
 ranges: `parameters.EFFECT_RANGES`.

@@ -174,11 +174,10 @@ PARAMETERS: dict[str, P] = {
                                "gives the pelvis its roll support on the pan"),
     "buttock_share": P(0.5, "-", "share of each side's pan tissue (stiffness, shear "
                        "stiffness and damping) at the lateral buttock point, the rest under "
-                       "the tuberosity: no "
-                       "source for the split; a pressure map peaks under the tuberosities "
-                       "and spreads over the buttocks, and the equal split keeps the "
-                       "vertical and fore-aft laws of one point per side (the same total "
-                       "at the same depth)"),
+                       "the tuberosity: no source for the split; a pressure map peaks under "
+                       "the tuberosities and spreads over the buttocks, and the equal split "
+                       "keeps the vertical and fore-aft laws of one point per side (the same "
+                       "total at the same depth)"),
     "l4l5_behind_hjc": P(0.075, "m", "L4-L5 disc ~7-8 cm posterior of the hip joints when "
                          "seated (Reed)", "length"),
     "l4l5_above_hjc": P(0.12, "m", "L4-L5 disc ~12 cm above the hip joints when seated (Reed)",
