@@ -263,11 +263,11 @@ def build(v: dict, effects: dict, h: float) -> Built:
             sc.append(share * v[sd])
             mu.append(mu_seat if mk == "mu_seat" else v[mk])
             foam.append(1.0 if fm else 0.0)
-            # Tissue friction under the pelvis and thighs (the seat-pan
-            # tissue; not the back pads' foam nor the heel pads).
-            jenkins.append(1.0 if cd.group in ("it", "buttock", "thigh") else 0.0)
             part = {"it": "pan", "buttock": "pan", "thigh": "pan", "foot": "floor",
                     "back": "back"}[cd.group]
+            # Tissue friction in the seat-pan tissue under the pelvis and
+            # thighs (not the back pads' foam nor the heel pads).
+            jenkins.append(1.0 if part == "pan" else 0.0)
             A_support[SUPPORTS.index(part), i] = 1.0
         n_exp.append(v["hc_exponent"])
     A_body = np.zeros((nk, nc))
