@@ -111,7 +111,7 @@ def main(argv=None) -> int:
                         "group (re-diagnoses)")
     args = p.parse_args(argv)
 
-    from ehm_drake.gap.lab.blind import score, summarize
+    from ehm_drake.gap.lab.scoring import score, summarize
     from ehm_drake.gap.reference_group.group import load_reference
     from ehm_drake.gap.reference_group.reference import diagnose_with_reference, rethreshold
     from ehm_drake.gap.single.diagnose import DiagnosisError, diagnose, load_lab_data

@@ -46,7 +46,7 @@ def blind_run(tmp_path_factory):
 
 @pytest.mark.slow
 def test_short_blind_run_meets_the_acceptance(blind_run):
-    from ehm_drake.gap.lab.blind import ACCEPTANCE
+    from ehm_drake.gap.lab.scoring import ACCEPTANCE
 
     out, _, s = blind_run
     labels = {t: {p: n for p, n in row.items() if n} for t, row in s["confusion"].items()}
@@ -73,7 +73,8 @@ def test_detectability_is_decided_from_the_key(blind_run):
     """The foam trial is detectable (many cells); the same subject without
     the effect leaves nothing once the base model is refit; a gap the
     diagnosis found counts as detectable whatever the check says."""
-    from ehm_drake.gap.lab.blind import detectability, score
+    from ehm_drake.gap.lab.blind import detectability
+    from ehm_drake.gap.lab.scoring import score
     from ehm_drake.gap.library.effects import EFFECTS
 
     out, spec, s = blind_run
@@ -241,7 +242,7 @@ def test_an_effect_named_outside_the_ranking_is_scored_first():
     """The level rule names softening where the ranking put it fourth: the
     blind score counts it as the diagnosis' first choice (top-1 and top-3),
     and on a no-effect subject as a false alarm."""
-    from ehm_drake.gap.lab.blind import score
+    from ehm_drake.gap.lab.scoring import score
 
     ranking = [{"effect": e, "gap_reduction_heldout": 0.1 - 0.01 * i}
                for i, e in enumerate(("visceral_mass", "reflex_delay", "arms", "softening"))]

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from bench_scripts import bench_script
 
-from ehm_drake.gap.lab.blind import score
+from ehm_drake.gap.lab.scoring import score
 from ehm_drake.gap.single.discrepancy import (
     EXPLAINED_BEYOND,
     KNOTS,

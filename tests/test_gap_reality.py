@@ -37,7 +37,7 @@ def reality_blind(tmp_path_factory):
 
 
 def test_no_effect_named_on_a_reality_and_the_structural_gap_located(reality_blind):
-    from ehm_drake.gap.lab.blind import ACCEPTANCE
+    from ehm_drake.gap.lab.scoring import ACCEPTANCE
 
     out, s = reality_blind
     assert s["trials"] == 1 and s["no_effect_trials"] == 1

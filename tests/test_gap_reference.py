@@ -258,7 +258,7 @@ def test_an_effect_far_weaker_than_the_models_strength_path_is_still_fitted():
 
 
 def test_candidates_without_held_out_gain_have_no_rank_for_top3():
-    from ehm_drake.gap.lab.blind import score
+    from ehm_drake.gap.lab.scoring import score
 
     ranking = [{"effect": "seat_friction", "heldout_gain": 40.0, "gap_reduction_heldout": 0.1},
                {"effect": "reflex_delay", "heldout_gain": 0.0, "gap_reduction_heldout": 0.0},
@@ -271,11 +271,64 @@ def test_candidates_without_held_out_gain_have_no_rank_for_top3():
     assert sc["top3"] and not sc["top1"]
 
 
+def test_a_detectable_miss_against_a_group_gets_its_cause():
+    """Against a reference group each detectable miss is given why: another
+    candidate named first; the hidden effect beyond its own bound and the
+    minimum gain but under the threshold the family-wise test raised; or
+    within its own bound.  A hit, an undetectable trial and a diagnosis
+    without a group get none; the run's summary counts the causes and its
+    report lists each miss with its numbers."""
+    from ehm_drake.gap.lab.scoring import markdown, score, summarize
+
+    def entry(name, evidence, bound, threshold):
+        return {"effect": name, "evidence": evidence, "null_bound": bound,
+                "null_threshold": threshold, "gap_reduction_heldout": 0.1}
+
+    def report(best, *entries):
+        return {"verdict": "explained" if best else "unexplained", "best_effect": best,
+                "ranking": list(entries), "gap_before": {"heldout": 1.0},
+                "method": {"min_gain": 16.3}}
+
+    group = [entry("cocontraction", 468.0, 167.0, 2174.0), entry("arms", 12.0, 441.0, 623.0)]
+    family = score({"cocontraction": 0.9}, report(None, *group), True, reality=True)
+    assert family["missed"]["cause"] == "the family-wise test"
+    assert family["missed"]["effects"]["cocontraction"] == {
+        "evidence": 468.0, "bound": 167.0, "threshold": 2174.0}
+    own = score({"arms": 0.9}, report(None, *group), True, reality=True)
+    assert own["missed"]["cause"] == "below its own bound"
+    # Beyond its bound but not the minimum gain: within the noise, not the test's doing.
+    weak = score({"arms": 0.9}, report(None, entry("arms", 15.0, 10.0, 20.0)), True,
+                 reality=True)
+    assert weak["missed"]["cause"] == "below its own bound"
+    other = score({"arms": 0.9}, report("cocontraction", *group), True, reality=True)
+    assert other["missed"] == {"cause": "another candidate named first",
+                               "named": "cocontraction", "effects": {
+                                   "arms": {"evidence": 12.0, "bound": 441.0,
+                                            "threshold": 623.0}}}
+    assert score({"visceral_mass": 0.9}, report(None, *group), True,
+                 reality=True)["missed"]["cause"] == "not a candidate"
+    assert score({"cocontraction": 0.9}, report("cocontraction", *group), True,
+                 reality=True)["missed"] is None
+    assert score({"arms": 0.9}, report(None, *group), False, reality=True)["missed"] is None
+    single = report(None, {"effect": "arms", "gap_reduction_heldout": 0.1})
+    assert score({"arms": 0.9}, single, True, reality=True)["missed"] is None
+
+    results = [{"trial": i, "hidden": h, "score": s} for i, (h, s) in enumerate(
+        [({"cocontraction": 0.9}, family), ({"arms": 0.9}, own), ({"arms": 0.9}, other)])]
+    summary = summarize(results, "lumped")
+    assert summary["misses"] == {"another candidate named first": 1,
+                                 "the family-wise test": 1, "below its own bound": 1}
+    md = markdown(summary, results)
+    assert "## Why the detectable misses were missed" in md
+    assert "| 0 | cocontraction | 468 | 167 | 2174 | the family-wise test | - |" in md
+    assert "| 2 | arms | 12 | 441 | 623 | another candidate named first | cocontraction |" in md
+
+
 def test_a_reality_is_judged_against_its_own_bar():
     """On an independent reality: top-1 >= 75%, top-3 >= 90%, false alarms
     <= 10%, at least 30 scored trials, no held-out share required; on the
     model itself: 80 / 95 / 10 and a 70% held-out share."""
-    from ehm_drake.gap.lab.blind import markdown, summarize
+    from ehm_drake.gap.lab.scoring import markdown, summarize
 
     def trial(i, hit, effect=True, in_top3=False):
         return {"trial": i, "hidden": {"arms": 1.0} if effect else {}, "score": {
@@ -391,7 +444,7 @@ def reference_blind(tmp_path_factory):
 @pytest.mark.slow
 @pytest.mark.xdist_group("gap_reference")
 def test_reference_group_blind_run_on_a_reality(reference_blind):
-    from ehm_drake.gap.lab.blind import ACCEPTANCE, acceptance_for
+    from ehm_drake.gap.lab.scoring import ACCEPTANCE, acceptance_for
 
     out, s = reference_blind
     subjects = sorted((out / "reference").glob("subject_*/frf.csv"))
