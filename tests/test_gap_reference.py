@@ -310,6 +310,15 @@ def test_a_detectable_miss_against_a_group_gets_its_cause():
     assert score({"cocontraction": 0.9}, report("cocontraction", *group), True,
                  reality=True)["missed"] is None
     assert score({"arms": 0.9}, report(None, *group), False, reality=True)["missed"] is None
+    # A candidate whose numbers are missing is never counted beyond its bound.
+    broken = report(None, entry("arms", float("nan"), 441.0, 623.0),
+                    entry("cocontraction", 468.0, None, None))
+    both = {"arms": 0.9, "cocontraction": 0.9}
+    trial = {"trial": 0, "hidden": both, "score": score(both, broken, True, reality=True)}
+    assert trial["score"]["missed"]["cause"] == "below its own bound"
+    md = markdown(summarize([trial], "lumped"), [trial])
+    assert "| 0 | arms | - | 441 | 623 | below its own bound | - |" in md
+    assert "| 0 | cocontraction | 468 | - | - | below its own bound | - |" in md
     single = report(None, {"effect": "arms", "gap_reduction_heldout": 0.1})
     assert score({"arms": 0.9}, single, True, reality=True)["missed"] is None
 

@@ -98,17 +98,23 @@ def _why_missed(hidden: list, ranking: list, predicted, method: dict) -> dict | 
         return None
     by = {e["effect"]: e for e in ranking}
     floor = float(method.get("min_gain", 0.0))
-    effects = {n: {"evidence": by[n]["evidence"], "bound": by[n]["null_bound"],
-                   "threshold": by[n]["null_threshold"]} for n in hidden if n in by}
+    effects = {n: {"evidence": by[n].get("evidence"), "bound": by[n].get("null_bound"),
+                   "threshold": by[n].get("null_threshold")} for n in hidden if n in by}
     if not effects:
         cause = MISS_CAUSES[0]
     elif predicted is not None:
         cause = MISS_CAUSES[1]
-    elif any(v["evidence"] > max(v["bound"], floor) for v in effects.values()):
+    elif any(_finite(v["evidence"]) and v["evidence"] > floor
+             and _finite(v["bound"]) and v["evidence"] > v["bound"]
+             for v in effects.values()):
         cause = MISS_CAUSES[2]
     else:
         cause = MISS_CAUSES[3]
     return {"cause": cause, "named": predicted, "effects": effects}
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)
 
 
 def summarize(results: list[dict], reality: str = MODEL_REALITY) -> dict:
@@ -189,8 +195,8 @@ def _miss_lines(summary: dict, results: list[dict]) -> list[str]:
             continue
         eff = m["effects"] or {n: None for n in r["hidden"]}
         for n, v in eff.items():
-            nums = (["-"] * 3 if v is None else
-                    [f"{v[k]:.0f}" for k in ("evidence", "bound", "threshold")])
+            nums = ["-" if v is None or not _finite(v[k]) else f"{v[k]:.0f}"
+                    for k in ("evidence", "bound", "threshold")]
             lines.append(f"| {r['trial']} | {n} | {' | '.join(nums)} | {m['cause']} | "
                          f"{m['named'] or '-'} |")
     return lines
