@@ -72,7 +72,7 @@ def score(truth: dict, report: dict, detectable: bool | None = None,
         "heldout_reduction_true": max(red) if red else None,
         "gap_before_heldout": report["gap_before"]["heldout"],
         "ranking_top3": ranking[:3],
-        "missed": (_why_missed(hidden, report["ranking"], predicted, report.get("method", {}))
+        "missed": (_why_missed(hidden, entries, predicted, report.get("method", {}))
                    if detectable and not top1 and not structural else None),
     }
 
