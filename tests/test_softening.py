@@ -156,6 +156,61 @@ def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
     assert soft._rows_in(rows) is None and soft._rows_in(laws._point_rows) is not None
 
 
+@pytest.mark.parametrize("design", ["implicit", "reference"])
+def test_the_compiled_softening_step_is_the_numpy_methods(design):
+    # Tissue and muscle elements (Cardan chains on the implicit design, ball
+    # joints on the paper's), running statistics, a frozen RMS, force
+    # offsets and the forces switched off: the compiled step's force, seat
+    # forces and next state are the NumPy methods' to 1e-12 of their scale.
+    if not jit.available():
+        pytest.skip("the compiled kernels are switched off (EHM_DRAKE_NO_JIT)")
+    p = params_from_dict({"softening": {"muscle": {"enabled": True}}})
+    p.simulation.design = design
+    p.simulation.time_step_s = 0.005 if design == "implicit" else 0.001
+    model = build_diagram(p, guard=False)
+    soft = model.systems["body_softening"]
+    assert soft._compiled and "muscle" in soft.elements.kinds and "tissue" in soft.elements.kinds
+    ctx = model.diagram.CreateDefaultContext()
+    plant = model.plant
+    pc = plant.GetMyMutableContextFromRoot(ctx)
+    sctx = soft.GetMyMutableContextFromRoot(ctx)
+    for port in ("seat_acceleration", "seat_displacement"):
+        model.diagram.GetInputPort(port).FixValue(ctx, np.zeros(3))
+    x0 = plant.GetPositionsAndVelocities(pc)
+    n = soft.elements.n
+    rng = np.random.default_rng(6)
+    touching = 0
+    for trial in range(6):
+        x = x0 + 2e-3 * rng.standard_normal(x0.size)
+        plant.SetPositionsAndVelocities(pc, x)
+        d = soft.rest_deformation(sctx)
+        sctx.SetDiscreteState(soft.state_index, np.concatenate(
+            [d + 1e-4 * rng.standard_normal(n), (1e-4 * rng.standard_normal(n)) ** 2]))
+        soft.set_rms(sctx, None if trial % 2 == 0 else 10 ** rng.uniform(-6, -3, n))
+        soft.set_force_offset(sctx, None if trial < 3 else rng.normal(scale=5.0, size=n))
+        soft.set_active(sctx, trial != 5)
+        if soft._n_tissue:
+            laws = model.systems["force_laws"]  # (the restraint normals it shares)
+            laws.GetOutputPort("generalized_force").Eval(laws.GetMyContextFromRoot(ctx))
+            touching += int(np.sum(d[:soft._n_tissue] < soft._geometry.face))
+        out = {}
+        for compiled in (True, False):
+            soft._compiled = compiled
+            c = soft.GetMyContextFromRoot(ctx.Clone())  # (fresh caches)
+            state = soft.AllocateDiscreteVariables()
+            soft.CalcForcedDiscreteVariableUpdate(c, state)
+            out[compiled] = (soft.GetOutputPort("generalized_force").Eval(c),
+                             soft.GetOutputPort("seat_forces").Eval(c),
+                             state.get_vector(soft.state_index).CopyToVector())
+        soft._compiled = True
+        for a, b, name in zip(out[True], out[False], ("force", "seat forces", "next state"),
+                              strict=True):
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * max(1e-12, np.max(np.abs(b))),
+                                       err_msg=name)
+        assert trial == 5 or np.any(out[True][0] != 0)
+    assert touching > 0
+
+
 def test_the_default_diagram_sums_the_laws_and_the_softening():
     model = build_diagram(load_params(), guard=False, seat_forces=False)
     adder = model.diagram.GetSubsystemByName("generalized_force_sum")

@@ -250,7 +250,8 @@ def _element_spring_kernel(s, k_rest, k_tissue, compliance, k_long, critical, ma
     return out
 
 
-_spring_kernel = kernel(_element_spring_kernel)
+#: `_element_spring_kernel` compiled, or None without numba.
+spring_kernel = _spring_kernel = kernel(_element_spring_kernel)
 
 
 def long_range_contacts(params):
@@ -307,5 +308,5 @@ def describe(params) -> str:
 
 __all__ = ["ElementSet", "MUSCLE_GROUPS", "TISSUE_PAIRS", "describe", "element_set",
            "element_spring", "equivalent_loss", "long_range_contacts", "long_range_stiffness",
-           "loss_fraction", "static_sink", "stationary_rms", "tissue_element_set",
+           "loss_fraction", "spring_kernel", "static_sink", "stationary_rms", "tissue_element_set",
            "tissue_movement"]

@@ -1,18 +1,29 @@
-"""The elementwise part of `ForceLaws`' step compiled with numba
-(`ehm_drake.jit`): the NumPy expressions of
-`ehm_drake.systems.forces.ForceLaws._elementwise_laws` (the contact dampers, the
-restraints' limits, law and slip, the restraint constraints' force, the
-PID and its integral, the passive joints) element by element in their
-order, so that the numbers are the same bits
-(tests/test_force_laws.py).  Used for float states with no separate
-controller input, on both designs (the ball joints' cosines, sines and
-tangents computed in NumPy); the products with the Jacobian and the
-projections stay in NumPy, the kinematics in Drake.
+"""`ForceLaws`' step compiled with numba (`ehm_drake.jit`).
+
+Two kernels do all of the step's arithmetic between Drake's kinematics
+calls, so that no NumPy operation runs per step on the compiled path:
+`_probe_kernel`, the contact dampers' deepest points and normal
+displacements (`_ContactProbe` in NumPy), and `_step_kernel`, the rest
+(the Jacobian's rows assembled, the velocities, head-in-space, the
+projections, the elementwise laws of `_laws_kernel`, the sum mapped
+through the Jacobian).  `_laws_kernel` is the NumPy expressions of
+`ehm_drake.systems.forces.ForceLaws._elementwise_laws` element by element
+in their order; the products, which NumPy hands to BLAS, are loops here,
+so the step's numbers are the NumPy step's to rounding
+(tests/test_force_laws.py: 1e-12).  Fewer Python operations per step cost
+less in themselves and leave the CPU's caches and predictors to the
+plant's contact solve, which ran about 80 us slower after the NumPy step
+(`docs/history/`).  Used for float states with no separate controller
+input, on both designs (the ball joints' cosines, sines and tangents
+computed in NumPy); the kinematics stay in Drake.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from pydrake.multibody.tree import JacobianWrtVariable
 
 from ..jit import available, kernel, maximum, minimum
 
@@ -33,6 +44,8 @@ def _cardan_to_generalized(tau, ball, trig):
 
 if available():  # (called by the compiled kernel below: compiled too)
     _cardan_to_generalized = kernel(_cardan_to_generalized)
+#: `_cardan_to_generalized` compiled (for the kernels), or the Python function.
+cardan_kernel = _cardan_to_generalized
 
 
 def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, point_prm,
@@ -44,8 +57,8 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, 
     and slip (`restraint_limits`, `restraint_law`, `slip_update`), the
     constraints' force at the step's start, the PID and its integral, the
     passive joints: the NumPy expressions of `_elementwise_laws` element by
-    element, in their order (the same bits: tests/test_force_laws.py).
-    The products with the Jacobian and the projections stay in NumPy.
+    element, in their order (`_step_kernel` calls it between the
+    projections and the product with the Jacobian).
 
     `ball`, `trig`: the ball joints' Cardan indices and their trigonometric
     terms (`_cardan_to_generalized`; none on Cardan chains);
@@ -145,6 +158,191 @@ def _laws_kernel(x, PV, VV, V, n, slip, z, pos_n_contact, ball, trig, axis_prm, 
 
 #: `_laws_kernel` compiled, or None without numba (`ehm_drake.jit`).
 compiled_laws = kernel(_laws_kernel)
+
+
+def _probe_kernel(A, axis, o_cols, tip_cols, p_BE, semi_axes, n0, points, c_cols):
+    """`_ContactProbe`'s arithmetic on the probed positions `A` (3 x m):
+    each contact point's deepest point of its ellipsoid against the seat
+    part's normal (`deepest_points`), written into `points`' columns
+    `c_cols` (where the Jacobian call reads them), and its normal
+    displacement from the anchor, returned (grouped order)."""
+    k = axis.shape[0]
+    pos_n = np.empty(k)
+    for i in range(k):
+        a = axis[i]
+        o = A[a, o_cols[i]]
+        m0 = A[a, tip_cols[i, 0]] - o
+        m1 = A[a, tip_cols[i, 1]] - o
+        m2 = A[a, tip_cols[i, 2]] - o
+        d0, d1, d2 = semi_axes[i, 0] * m0, semi_axes[i, 1] * m1, semi_axes[i, 2] * m2
+        norm = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        c0 = p_BE[i, 0] - semi_axes[i, 0] * d0 / norm
+        c1 = p_BE[i, 1] - semi_axes[i, 1] * d1 / norm
+        c2 = p_BE[i, 2] - semi_axes[i, 2] * d2 / norm
+        points[0, c_cols[i]] = c0
+        points[1, c_cols[i]] = c1
+        points[2, c_cols[i]] = c2
+        pos_n[i] = o + (m0 * c0 + m1 * c1 + m2 * c2) - n0[i]
+    return pos_n
+
+
+def _sparse_product(indptr, indices, data, u, offset):
+    """M u - offset for M in compressed rows (indptr, indices, data)."""
+    out = np.empty(indptr.shape[0] - 1)
+    for r in range(out.shape[0]):
+        acc = 0.0
+        for j in range(indptr[r], indptr[r + 1]):
+            acc += data[j] * u[indices[j]]
+        out[r] = acc - offset[r]
+    return out
+
+
+def _step_kernel(x, nq, A, p_cols, JJ, jp_rows, jc_rows, J_head, J_trunk, J_com, R_WH,
+                 his_kp, his_kd, R_ref_T, m_ptr, m_idx, m_val, m0, n_pt, mass, a, slip, z,
+                 pos_n_contact, rot_v, v_index, ball, trig, axis_prm, point_prm, flags,
+                 constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm, q_index,
+                 v_x, period):
+    """`ForceLaws._calc_step` after the kinematics, compiled: the rows of
+    J (the restraint points' rows `jp_rows` and the contact points' rows
+    `jc_rows` of the probed Jacobian `JJ`, between them head, upper torso
+    and centre of mass), V = J v, the head-in-space torque, the points'
+    projections PV = M p - m0 and VV = M V (M in compressed rows), the
+    elementwise laws (`_laws_kernel`), G and f = J^T G + the joints' PID
+    and passive forces.  `A`'s columns `p_cols` are the restraint points'
+    positions.  Returns (f, J, G, w, slip_next, fd, pid_force, pid_torque,
+    z_next, passive, his_torque, PV)."""
+    nv = JJ.shape[1]
+    n3, nc = jp_rows.shape[0], jc_rows.shape[0]
+    rows = n3 + 9 + nc
+    J = np.empty((rows, nv))
+    for r in range(n3):
+        J[r, :] = JJ[jp_rows[r], :]
+    J[n3:n3 + 3, :] = J_head
+    J[n3 + 3:n3 + 6, :] = J_trunk
+    J[n3 + 6:n3 + 9, :] = J_com
+    for r in range(nc):
+        J[n3 + 9 + r, :] = JJ[jc_rows[r], :]
+    V = np.empty(rows)
+    for r in range(rows):
+        acc = 0.0
+        for k in range(nv):
+            acc += J[r, k] * x[nq + k]
+        V[r] = acc
+    # Head-in-space: tau = -(kp e + kd w), e the roll, pitch, yaw of R_WH R_ref^T.
+    R = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = R_WH[i, 0] * R_ref_T[0, j] + R_WH[i, 1] * R_ref_T[1, j] \
+                + R_WH[i, 2] * R_ref_T[2, j]
+    e0 = math.atan2(R[2, 1], R[2, 2])
+    e1 = math.atan2(-R[2, 0], math.sqrt(R[0, 0] * R[0, 0] + R[1, 0] * R[1, 0]))
+    e2 = math.atan2(R[1, 0], R[0, 0])
+    tau = np.empty(3)
+    tau[0] = -(his_kp[0] * e0 + his_kd[0] * V[n3])
+    tau[1] = -(his_kp[1] * e1 + his_kd[1] * V[n3 + 1])
+    tau[2] = -(his_kp[2] * e2 + his_kd[2] * V[n3 + 2])
+    # The points' projections.
+    p = np.empty(3 * p_cols.shape[0])  # [x; y; z] point by point (column-major P)
+    for i in range(p_cols.shape[0]):
+        for d in range(3):
+            p[3 * i + d] = A[d, p_cols[i]]
+    PV = _sparse_product(m_ptr, m_idx, m_val, p, m0)
+    VV = _sparse_product(m_ptr, m_idx, m_val, V, np.zeros(m0.shape[0]))
+    w, slip_next, fd, pid_force, pid_torque, z_next, passive = compiled_laws(
+        x, PV, VV, V, n_pt, slip, z, pos_n_contact, ball, trig, axis_prm, point_prm, flags,
+        constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm, q_index, v_x,
+        period)
+    # G: the restraints' point forces (M^T w), +tau on the head, -tau on the
+    # upper torso, the inertial load -m a at the centre of mass, the contact
+    # dampers' normal forces.
+    G = np.zeros(rows)
+    for r in range(m_ptr.shape[0] - 1):
+        for j in range(m_ptr[r], m_ptr[r + 1]):
+            G[m_idx[j]] += m_val[j] * w[r]
+    for i in range(3):
+        G[n3 + i] = tau[i]
+        G[n3 + 3 + i] = -tau[i]
+        G[n3 + 6 + i] = -mass * a[i]
+    for r in range(nc):
+        G[n3 + 9 + r] = fd[r]
+    f = np.empty(nv)
+    for k in range(nv):
+        acc = 0.0
+        for r in range(rows):
+            acc += J[r, k] * G[r]
+        f[k] = acc
+    for i in range(rot_v.shape[0]):
+        f[rot_v[i]] += pid_force[i]
+    for i in range(v_index.shape[0]):
+        f[v_index[i]] += passive[i]
+    return f, J, G, w, slip_next, fd, pid_force, pid_torque, z_next, passive, tau, PV
+
+
+#: The two step kernels compiled, or None without numba.
+compiled_probe = kernel(_probe_kernel)
+if available():  # (called by the compiled step kernel: compiled too)
+    _sparse_product = kernel(_sparse_product)
+compiled_step_kernel = kernel(_step_kernel)
+
+
+class StepStructure:
+    """What `compiled_step` passes the kernels that depends only on the
+    model: M (`ForceLaws`' projections) in compressed rows, which columns
+    and rows of the probed positions and Jacobian are the restraint and
+    contact points'."""
+
+    def __init__(self, laws):
+        M = laws._M
+        nz = [np.flatnonzero(row) for row in M]
+        self.m_ptr = np.concatenate([[0], np.cumsum([len(c) for c in nz])]).astype(np.int64)
+        self.m_idx = np.concatenate(nz).astype(np.int64)
+        self.m_val = np.concatenate([row[c] for row, c in zip(M, nz, strict=True)])
+        n = len(laws._points)
+        probe = getattr(laws, "_probe", None)
+        if laws._contact_damping is None:
+            self.p_cols, self.jp_rows = np.arange(n), np.arange(3 * n)
+            self.jc_rows = np.zeros(0, np.int64)
+        else:
+            self.p_cols, self.jp_rows, self.jc_rows = probe.p_cols, probe.jp_rows, probe.jc_rows
+
+
+def compiled_step(laws, context, s):
+    """`ForceLaws._calc_step` on the compiled path: Drake's kinematics, then
+    the two kernels; fills and returns the `_Step` `s`."""
+    c = laws._constants.Eval(context)
+    x = laws._state_port.Eval(context)
+    st = laws._structure
+    if st is None:
+        st = laws._structure = StepStructure(laws)
+    p, W, kv = laws._scratch.plant, laws._world, JacobianWrtVariable.kV
+    ctx = laws._scratch.set_state(x)
+    R_WH = p.EvalBodyPoseInWorld(ctx, laws._head_body).rotation().matrix()
+    J_head = p.CalcJacobianAngularVelocity(ctx, kv, laws._head, W, W)
+    J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, laws._trunk, W, W)
+    J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, laws._instances, kv, W, W)
+    if laws._contact_damping is None:
+        groups = laws._geometry.groups
+        A = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
+                            for frame, P_B, _ in groups], axis=1)
+        JJ = np.concatenate([p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
+                             for frame, P_B, _ in groups])
+        pos_n_contact = NO_CONTACTS
+    else:
+        A, JJ, pos_n_contact = laws._probe.raw(p, ctx, W)
+    ball, *packed = c.packed
+    (s.f, s.J, s.G, s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
+     s.passive_force, s.his_torque, PV) = compiled_step_kernel(
+        x, laws._nq, A, st.p_cols, JJ, st.jp_rows, st.jc_rows, J_head, J_trunk, J_com, R_WH,
+        c.his_kp, c.his_kd, c.his_R_ref_T, st.m_ptr, st.m_idx, st.m_val, laws._m0,
+        len(laws._points), laws._mass, laws._a_port.Eval(context),
+        laws._discrete(context, laws._slip), laws._discrete(context, laws._z), pos_n_contact,
+        laws._layout.rot_v, laws._v_index, ball, ball_trigonometry(laws, x), *packed)
+    if laws._contact_damping is not None:
+        s.fd = fd
+    n2 = 2 * len(laws._points)
+    s.pos, s.pos_n = PV[:n2], PV[n2:n2 + len(laws._points)]
+    s.J_his = None
+    return s
 #: The contact points' normal displacements where there are no contact dampers.
 NO_CONTACTS = np.zeros(0)
 #: The ball joints' trigonometric terms on Cardan chains (none).
@@ -156,8 +354,13 @@ def ball_trigonometry(laws, x):
     `_laws_kernel` takes them (NumPy's functions: the NumPy path's numbers)."""
     if laws._cardan_chains:
         return NO_BALLS
-    q_rot = x[laws._layout.rot_q]
-    p, y = q_rot[laws._ball.pitch], q_rot[laws._ball.yaw]
+    return trigonometry(laws._ball, x[laws._layout.rot_q])
+
+
+def trigonometry(ball, q_rot):
+    """The trigonometric terms of the ball joints `ball` (`_BallIndex`) at
+    rotational angles `q_rot` (5 x nb, `_cardan_to_generalized`'s `trig`)."""
+    p, y = q_rot[ball.pitch], q_rot[ball.yaw]
     return np.array([np.cos(p), np.cos(y), np.sin(y), np.tan(p), np.sin(p)])
 
 
@@ -193,4 +396,7 @@ def packed_constants(laws, c):
             laws._period)
 
 
-__all__ = ["NO_BALLS", "NO_CONTACTS", "ball_trigonometry", "compiled_laws", "packed_constants"]
+__all__ = ["NO_BALLS", "NO_CONTACTS", "StepStructure", "ball_trigonometry", "cardan_kernel",
+           "compiled_laws",
+           "compiled_probe", "compiled_step", "compiled_step_kernel", "packed_constants",
+           "trigonometry"]

@@ -17,9 +17,9 @@ The laws are unchanged; the sum is ordered differently, so the forces
 differ from the five systems' sum by rounding only
 (`tests/test_force_laws.py` checks it to 1e-12 at random states).
 
-On float states with no separate controller input the elementwise laws run
-compiled (`ehm_drake.systems.compiled_laws`, numba; the same bits), else in
-NumPy.
+On float states with no separate controller input the step's arithmetic
+runs compiled (`ehm_drake.systems.compiled_laws`, numba: the same numbers to
+rounding), else in NumPy.
 
 The parts keep their identities for the code that reads or changes them
 in a context (the static equilibrium, the gap diagnosis' families and
@@ -42,7 +42,13 @@ from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from ..model.joint_layout import JointLayout
 from ..model.restraints import deepest_points
 from . import PlantScratch, define_system
-from .compiled_laws import NO_CONTACTS, ball_trigonometry, compiled_laws, packed_constants
+from .compiled_laws import (
+    NO_CONTACTS,
+    compiled_laws,
+    compiled_probe,
+    compiled_step,
+    packed_constants,
+)
 from .his import head_in_space_torque
 from .joints import PID_PARAMETERS, _BallIndex, cardan_to_generalized, passive_torque
 from .rotations import rotation_from_rpy
@@ -178,6 +184,21 @@ class _ContactProbe:
         self.n0 = g.n0[g.order]
         self.frames = [frame for frame, _, _ in g.groups]
 
+    def raw(self, plant, context, world):
+        """(A, JJ, normal displacements): the probed positions and the
+        Jacobian of every probed point as Drake gives them, the arithmetic
+        compiled (`compiled_probe`); `compiled_step` selects the rows."""
+        A = np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
+                            for frame, probe in zip(self.frames, self.probes, strict=True)],
+                           axis=1)
+        pos_n = compiled_probe(A, self.axis, self.o_cols, self.tip_cols, self.p_BE,
+                               self.semi_axes, self.n0, self.points, self.c_cols)
+        kv = JacobianWrtVariable.kV
+        JJ = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, b,
+                                                                     world, world)
+                             for frame, b in zip(self.frames, self.views, strict=True)])
+        return A, JJ, pos_n
+
     def __call__(self, plant, context, world):
         A = np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
                             for frame, probe in zip(self.frames, self.probes, strict=True)],
@@ -286,6 +307,7 @@ def ForceLaws_(T):
             self._cardan_chains = not len(self._ball.roll)
             # The compiled elementwise laws (`_laws_kernel`) where they apply.
             self._compiled = compiled_laws is not None and T is float and not feedback_input
+            self._structure = None  # (`compiled_step`'s, made at its first step)
 
             # Joint PID.
             *gains, implicit_kp = pid
@@ -470,6 +492,11 @@ def ForceLaws_(T):
             mass), so that all velocities are one product with v and the
             generalized force one product with J^T."""
             s = _Step()
+            if self._compiled:  # the same in two compiled kernels
+                compiled_step(self, context, s)
+                self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, s.J))
+                value.set_value(s)
+                return
             c = self._constants.Eval(context)
             x = self._state_port.Eval(context)
             xf = x if self._feedback_port is None else self._feedback_port.Eval(context)
@@ -527,16 +554,7 @@ def ForceLaws_(T):
             self._scratch.share(RESTRAINT_NORMALS, (self._point_rows, s.pos_n, J))
             slip = self._discrete(context, self._slip)
             z = self._discrete(context, self._z)
-            if self._compiled:  # the elementwise laws below in one compiled call
-                ball, *packed = c.packed
-                (s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
-                 s.passive_force) = compiled_laws(x, PV, VV, V, len(self._points), slip, z,
-                                                  pos_n_contact, ball,
-                                                  ball_trigonometry(self, x), *packed)
-                if self._contact_damping is not None:
-                    s.fd = fd
-            else:
-                self._elementwise_laws(s, c, x, xf, V, PV, VV, slip, z, pos_n_contact)
+            self._elementwise_laws(s, c, x, xf, V, PV, VV, slip, z, pos_n_contact)
             F = self._M_T @ s.w
             # The sum: restraints, head-in-space (+tau on the head, -tau on
             # the trunk), inertial load -m a at the centre of mass, joints.

@@ -23,6 +23,10 @@ body rests), then ``force_offset`` per element (N or N m, 0: a force added
 to the element's law, which the equivalent-linear iteration perturbs to
 find how the element's force moves the body, `ehm_drake.analysis.equivalent`).
 
+On float states one compiled call (`_softening_kernel`, numba) gives
+the step's force, seat forces and next state, the NumPy methods' numbers to
+rounding; AutoDiffXd and a machine without numba use the methods.
+
 Each element applies, about its running mean, the stiffness
 `element_spring` gives: a tissue element its short-range stiffness on the
 contact's long-range one, a muscle element minus what it has lost
@@ -41,9 +45,17 @@ from pydrake.systems.framework import (
     ValueProducer,
 )
 
+from ..jit import kernel
 from ..model.joint_layout import JointLayout
-from ..model.softening import ElementSet, element_spring, equivalent_loss, stationary_rms
+from ..model.softening import (
+    ElementSet,
+    element_spring,
+    equivalent_loss,
+    spring_kernel,
+    stationary_rms,
+)
 from . import PlantScratch, define_system
+from .compiled_laws import NO_BALLS, cardan_kernel, trigonometry
 from .forces import RESTRAINT_NORMALS
 from .joints import _BallIndex, cardan_to_generalized
 from .seat import SEAT_PART_NAMES, RestraintGeometry, in_contact
@@ -99,6 +111,26 @@ def BodySoftening_(T):
                 prerequisites_of_calc={
                     self.discrete_state_ticket(DiscreteStateIndex(self._stats)),
                     self.numeric_parameter_ticket(NumericParameterIndex(self._param))})
+            # On float states every step's numbers in one compiled call
+            # (`_softening_kernel`): the force, the seat forces and the update.
+            self._compiled = T is float and _compiled_softening is not None
+            if self._compiled:
+                g = self._geometry
+                ball = np.array([self._ball.roll, self._ball.pitch, self._ball.yaw], np.int64)
+                self._kernel_constants = (
+                    np.zeros(0) if g is None else np.asarray(g.face, float),
+                    np.asarray(layout.rot_q, np.int64)[self._muscle],
+                    np.zeros((3 * len(SEAT_PART_NAMES), 0)) if g is None else
+                    np.ascontiguousarray(g.sum_parts @ g.N.T),
+                    *elements._kernel_arguments,
+                    np.ascontiguousarray(np.broadcast_to(self._alpha, (elements.n,)), float),
+                    np.asarray(layout.rot_v, np.int64), np.asarray(self._muscle, np.int64),
+                    ball, layout.num_rotational)
+                self._compiled_step = self.DeclareCacheEntry(
+                    "softening step", ValueProducer(
+                        allocate=lambda: AbstractValue.Make(None),
+                        calc=lambda context, value: value.set_value(
+                            self._calc_compiled(context))))
             self.DeclareVectorOutputPort("generalized_force", self._nv, self._calc_force)
             self.DeclareVectorOutputPort("deformation", n, self._calc_deformation)
             self.DeclareVectorOutputPort("seat_forces", 3 * len(SEAT_PART_NAMES),
@@ -233,7 +265,38 @@ def BodySoftening_(T):
                 self._last_spring = (key, active * element_spring(self._elements, rms))
             return self._last_spring[1], mean, offset
 
+        def _calc_compiled(self, context):
+            """(force, seat forces, next discrete state) at the context's
+            state on the compiled path."""
+            x = self._state_port.Eval(context)
+            nv = self._nv
+            if self._geometry is not None:
+                ctx = self._scratch.set_state(x)
+                shared = self._scratch.shared(RESTRAINT_NORMALS)
+                rows = None if shared is None else self._rows_in(shared[0])
+                if rows is not None:  # the restraints' at this state
+                    (index, j_rows, sign), pos_n, J = rows, shared[1], shared[2]
+                    sign = sign[:, 0]
+                else:
+                    pos_n, J = self._geometry.normal_kinematics(self._scratch.plant, ctx)
+                    index = j_rows = np.arange(len(pos_n))
+                    sign = np.ones(len(pos_n))
+            else:
+                pos_n, J = np.zeros(0), np.zeros((0, nv))
+                index = j_rows = np.zeros(0, np.int64)
+                sign = np.zeros(0)
+            trig = (trigonometry(self._ball, x[self._layout.rot_q])
+                    if len(self._muscle) and len(self._ball.roll) else NO_BALLS)
+            return _compiled_softening(
+                x, pos_n, J, index, j_rows, sign,
+                context.get_discrete_state(self._stats).get_value(),
+                context.get_numeric_parameter(self._param).get_value(), nv, trig,
+                *self._kernel_constants)
+
         def _calc_force(self, context, output):
+            if self._compiled:
+                output.SetFromVector(self._compiled_step.Eval(context)[0])
+                return
             d, Jn, touching = self._deformation(context)
             k, mean, offset = self._spring(context)
             f_el = offset - k * (d - mean)
@@ -256,6 +319,9 @@ def BodySoftening_(T):
             return (offset[:nt] - k[:nt] * (d[:nt] - mean[:nt])) * touching
 
         def _calc_seat_forces(self, context, output):
+            if self._compiled:
+                output.SetFromVector(self._compiled_step.Eval(context)[1])
+                return
             if not self._n_tissue:
                 output.SetFromVector(np.zeros(3 * len(SEAT_PART_NAMES)))
                 return
@@ -272,6 +338,10 @@ def BodySoftening_(T):
             output.SetFromVector(self._loss(context)[0])
 
         def _update(self, context, discrete_state):
+            if self._compiled:
+                discrete_state.get_mutable_vector(self._stats).SetFromVector(
+                    self._compiled_step.Eval(context)[2])
+                return
             n = self._elements.n
             d = self._deformation(context)[0]
             stats = context.get_discrete_state(self._stats).CopyToVector()
@@ -285,6 +355,64 @@ def BodySoftening_(T):
 
 
 BodySoftening = BodySoftening_[None]
+
+
+def _softening_kernel(x, pos_n, J, index, j_rows, sign, stats, prm, nv, trig, face, muscle_q,
+                      seat_sum, k_rest, k_tissue, compliance, k_long, critical, max_loss, tissue,
+                      iterations, alpha, rot_v, muscle, ball, n_rot):
+    """`BodySoftening`'s step on a float state, compiled: the deformation
+    (the tissue points' normal displacements `pos_n[index]` and Jacobian
+    rows `sign J[j_rows]`, shared by `ForceLaws`; the muscle DoFs' angles),
+    the springs at the RMS movement (`element_spring`), the elements'
+    forces about the running means mapped to the generalized force, the
+    tissue's forces summed per seat part (`seat_sum`: sum_parts N^T) and
+    the running means and variances advanced.  The NumPy methods'
+    operations; their products are loops here (the same numbers to
+    rounding: tests/test_softening.py).  Returns (force, seat forces, next
+    state)."""
+    n = stats.shape[0] // 2
+    nt = index.shape[0]
+    d = np.empty(n)
+    for i in range(nt):
+        d[i] = pos_n[index[i]]
+    for j in range(n - nt):
+        d[nt + j] = x[muscle_q[j]]
+    s = np.empty(n)
+    for i in range(n):
+        s[i] = prm[i] if prm[i] >= 0 else np.sqrt(max(stats[n + i], 0.0) + 1e-30)
+    k = spring_kernel(s, k_rest, k_tissue, compliance, k_long, critical, max_loss, tissue,
+                      iterations)
+    active = prm[n]
+    force = np.zeros(nv)
+    tissue_force = np.empty(nt)
+    for i in range(nt):
+        f_el = prm[n + 1 + i] - active * k[i] * (d[i] - stats[i])
+        fi = f_el * (1.0 if (face[i] - d[i]) > 0 else 0.0)
+        tissue_force[i] = fi
+        for c in range(nv):
+            force[c] += sign[i] * J[j_rows[i], c] * fi
+    if n > nt:
+        tau = np.zeros(n_rot)
+        for j in range(n - nt):
+            tau[muscle[j]] = prm[n + 1 + nt + j] - active * k[nt + j] * (d[nt + j] - stats[nt + j])
+        if ball.shape[1]:
+            tau = cardan_kernel(tau, ball, trig)
+        for i in range(n_rot):
+            force[rot_v[i]] += tau[i]
+    seat = np.zeros(seat_sum.shape[0])
+    for r in range(seat_sum.shape[0]):
+        for i in range(nt):
+            seat[r] += seat_sum[r, i] * tissue_force[i]
+    nxt = np.empty(2 * n)
+    for i in range(n):
+        e = d[i] - stats[i]
+        nxt[i] = stats[i] + alpha[i] * e
+        nxt[n + i] = stats[n + i] + alpha[i] * (e * e - stats[n + i])
+    return force, seat, nxt
+
+
+#: `_softening_kernel` compiled, or None without numba (the NumPy methods serve).
+_compiled_softening = kernel(_softening_kernel)
 
 
 def softening_initial_state(elements: ElementSet, deformation) -> np.ndarray:
