@@ -305,7 +305,7 @@ def ForceLaws_(T):
             self._spine_v_x = nq + L.spine_v
             self._v_x = nq + self._v_index
             self._cardan_chains = not len(self._ball.roll)
-            # The compiled elementwise laws (`_laws_kernel`) where they apply.
+            # The compiled step (`compiled_step`: two kernels) where it applies.
             self._compiled = compiled_laws is not None and T is float and not feedback_input
             self._structure = None  # (`compiled_step`'s, made at its first step)
 
