@@ -188,21 +188,27 @@ class _ContactProbe:
         """(A, JJ, normal displacements): the probed positions and the
         Jacobian of every probed point as Drake gives them, the arithmetic
         compiled (`compiled_probe`); `compiled_step` selects the rows."""
-        A = np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
-                            for frame, probe in zip(self.frames, self.probes, strict=True)],
-                           axis=1)
+        A = self._positions(plant, context, world)
         pos_n = compiled_probe(A, self.axis, self.o_cols, self.tip_cols, self.p_BE,
                                self.semi_axes, self.n0, self.points, self.c_cols)
+        return A, self._jacobian(plant, context, world, self.views), pos_n
+
+    def _positions(self, plant, context, world):
+        """The probed points' positions, every group side by side (3 x m)."""
+        return np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
+                               for frame, probe in zip(self.frames, self.probes, strict=True)],
+                              axis=1)
+
+    def _jacobian(self, plant, context, world, points):
+        """The translational Jacobian of each group's [P_B | C_B] `points`,
+        stacked."""
         kv = JacobianWrtVariable.kV
-        JJ = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, b,
-                                                                     world, world)
-                             for frame, b in zip(self.frames, self.views, strict=True)])
-        return A, JJ, pos_n
+        return np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, b,
+                                                                        world, world)
+                               for frame, b in zip(self.frames, points, strict=True)])
 
     def __call__(self, plant, context, world):
-        A = np.concatenate([plant.CalcPointsPositions(context, frame, probe, world)
-                            for frame, probe in zip(self.frames, self.probes, strict=True)],
-                           axis=1)
+        A = self._positions(plant, context, world)
         o = A[self.axis, self.o_cols]  # the body origins' coordinate along the normal
         m = A[self.axis[:, None], self.tip_cols] - o[:, None]
         C = deepest_points(m, self.p_BE, self.semi_axes)
@@ -213,10 +219,7 @@ class _ContactProbe:
             both = self.points.astype(object)
             both[:, self.c_cols] = C.T
             points = [both[:, b] for b in self.blocks]
-        kv = JacobianWrtVariable.kV
-        JJ = np.concatenate([plant.CalcJacobianTranslationalVelocity(context, kv, frame, b,
-                                                                     world, world)
-                             for frame, b in zip(self.frames, points, strict=True)])
+        JJ = self._jacobian(plant, context, world, points)
         return (A[:, self.p_cols], JJ[self.jp_rows], JJ[self.jc_rows],
                 o + np.add.reduce(m * C, axis=1) - self.n0)
 

@@ -193,20 +193,27 @@ def BodySoftening_(T):
             x = self._state_port.Eval(context)
             parts, Jn, touching = [], None, None
             if self._geometry is not None:
-                g = self._geometry
-                ctx = self._scratch.set_state(x)
-                shared = self._scratch.shared(RESTRAINT_NORMALS)
-                rows = None if shared is None else self._rows_in(shared[0])
+                pos_n, Jn, rows = self._normal_kinematics(x)
                 if rows is not None:  # the restraints' at this state (same bits)
                     index, j_rows, sign = rows
-                    pos_n, Jn = shared[1][index], sign * shared[2][j_rows]
-                else:
-                    pos_n, Jn = g.normal_kinematics(self._scratch.plant, ctx)
+                    pos_n, Jn = pos_n[index], sign * Jn[j_rows]
                 parts.append(pos_n)
-                touching = in_contact(g.face, pos_n)
+                touching = in_contact(self._geometry.face, pos_n)
             if len(self._muscle):
                 parts.append(x[self._layout.rot_q][self._muscle])
             return np.concatenate(parts), Jn, touching
+
+        def _normal_kinematics(self, x):
+            """(normal displacements, Jacobian's normal rows, rows) at plant
+            state x: what `ForceLaws` shared at x, with `rows` (`_rows_in`)
+            saying where the tissue points are in it, or the tissue points'
+            own, computed here, with `rows` None."""
+            ctx = self._scratch.set_state(x)
+            shared = self._scratch.shared(RESTRAINT_NORMALS)
+            rows = None if shared is None else self._rows_in(shared[0])
+            if rows is not None:
+                return shared[1], shared[2], rows
+            return (*self._geometry.normal_kinematics(self._scratch.plant, ctx), None)
 
         def _rows_in(self, point_rows: dict):
             """Where the tissue points' normal displacements and Jacobian
@@ -271,14 +278,10 @@ def BodySoftening_(T):
             x = self._state_port.Eval(context)
             nv = self._nv
             if self._geometry is not None:
-                ctx = self._scratch.set_state(x)
-                shared = self._scratch.shared(RESTRAINT_NORMALS)
-                rows = None if shared is None else self._rows_in(shared[0])
+                pos_n, J, rows = self._normal_kinematics(x)
                 if rows is not None:  # the restraints' at this state
-                    (index, j_rows, sign), pos_n, J = rows, shared[1], shared[2]
-                    sign = sign[:, 0]
+                    index, j_rows, sign = rows[0], rows[1], rows[2][:, 0]
                 else:
-                    pos_n, J = self._geometry.normal_kinematics(self._scratch.plant, ctx)
                     index = j_rows = np.arange(len(pos_n))
                     sign = np.ones(len(pos_n))
             else:
