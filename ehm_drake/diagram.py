@@ -305,7 +305,9 @@ def build_diagram(
     builder.Connect(disp_out, channels.GetInputPort("seat_displacement"))
     sys["body_channels"] = channels
     if seat_forces:
-        forces = builder.AddNamedSystem("seat_forces", SeatForces(plant, hp.seat_geometries))
+        candidates = len(hp.scene_graph.model_inspector().GetCollisionCandidates())
+        forces = builder.AddNamedSystem("seat_forces",
+                                        SeatForces(plant, hp.seat_geometries, candidates))
         builder.Connect(plant.get_contact_results_output_port(),
                         forces.GetInputPort("contact_results"))
         restraint_forces = law_ports["restraint_seat_forces"]

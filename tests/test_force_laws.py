@@ -432,7 +432,7 @@ def test_the_compiled_step_is_the_numpy_step(design, branches):
     dampers) and the reference design (ball joints, their damping
     remainder) the compiled step gives the NumPy step's numbers at random
     states to 1e-12 of each quantity's scale (its products are loops, not
-    BLAS: the last bits differ), its Jacobian exactly, with every branch of
+    BLAS, and its kinematics its own: the last bits differ), with every branch of
     the restraint law switched on (gating, cubic and linear normal forces,
     friction, slipping anchors) or the model's own."""
     from ehm_drake import jit
@@ -475,10 +475,66 @@ def test_the_compiled_step_is_the_numpy_step(design, branches):
             want = getattr(b, name)
             np.testing.assert_allclose(getattr(a, name), want, rtol=0, err_msg=name,
                                        atol=1e-12 * max(1.0, np.max(np.abs(want))))
-        np.testing.assert_array_equal(a.J, b.J)
+        np.testing.assert_allclose(a.J, b.J, rtol=0, atol=1e-12 * np.max(np.abs(b.J)))
+        seat = laws._seat @ np.concatenate([b.w[:2 * n], laws._normal_forces(b)])
+        np.testing.assert_allclose(a.seat_forces, seat, rtol=0,
+                                   atol=1e-12 * max(1.0, np.max(np.abs(seat))))
         np.testing.assert_allclose(a.G, b.G, rtol=0, atol=1e-12 * np.max(np.abs(b.G)))
         assert np.any(a.slip_next != 0)
         assert np.any(a.fd != 0) if design == "implicit" else len(laws._ball.roll) > 0
+
+
+@pytest.mark.parametrize("design", ["implicit", "reference"])
+def test_the_compiled_kinematics_are_drakes(design):
+    """`TreeKinematics` (revolute, prismatic, floating and weld joints on the
+    implicit design; ball and universal joints on the reference design)
+    gives Drake's body poses, point positions, point Jacobians, angular
+    Jacobians and centre-of-mass Jacobian at random states to 1e-13 of
+    their scale, and declines a plant with a joint it does not know."""
+    from pydrake.multibody.plant import MultibodyPlant
+    from pydrake.multibody.tree import BodyIndex, JacobianWrtVariable, SpatialInertia
+
+    from ehm_drake.systems.compiled_kinematics import TreeKinematics
+
+    params = implicit() if design == "implicit" else reference_design(load_params(PAPER))
+    laws = build_diagram(params, guard=False, seat_forces=False).systems["force_laws"]
+    plant = laws._scratch.plant
+    ctx, W, kv = plant.CreateDefaultContext(), plant.world_frame(), JacobianWrtVariable.kV
+    tree = TreeKinematics.of(plant, ctx, laws._instances, laws._head, laws._trunk)
+    kinds = {plant.get_joint(j).type_name() for j in plant.GetJointIndices()}
+    assert kinds >= ({"revolute", "rpy_floating", "prismatic", "weld"} if design == "implicit"
+                     else {"ball_rpy", "universal", "rpy_floating"})
+    groups = laws._geometry.groups
+    P = np.concatenate([P_B for _, P_B, _ in groups], axis=1)
+    body = np.repeat([int(f.body().index()) for f, _, _ in groups],
+                     [P_B.shape[1] for _, P_B, _ in groups])
+    rng = np.random.default_rng(3)
+
+    def close(a, b):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-13 * max(1.0, np.max(np.abs(b))))
+
+    for _ in range(5):
+        q = plant.GetPositions(ctx) + rng.uniform(-0.5, 0.5, plant.num_positions())
+        plant.SetPositions(ctx, q)
+        R_WB, p_WB, w, o, t, A = tree.poses(q, P, body)
+        JJ, J_head, J_trunk, J_com = tree.jacobians(R_WB, p_WB, w, o, t, P, body)
+        for b in range(plant.num_bodies()):
+            X = plant.EvalBodyPoseInWorld(ctx, plant.get_body(BodyIndex(b)))
+            close(R_WB[b], X.rotation().matrix())
+            close(p_WB[b], X.translation())
+        close(A, np.concatenate([plant.CalcPointsPositions(ctx, f, P_B, W)
+                                 for f, P_B, _ in groups], axis=1))
+        close(JJ, np.concatenate([plant.CalcJacobianTranslationalVelocity(ctx, kv, f, P_B, W, W)
+                                  for f, P_B, _ in groups]))
+        close(J_head, plant.CalcJacobianAngularVelocity(ctx, kv, laws._head, W, W))
+        close(J_trunk, plant.CalcJacobianAngularVelocity(ctx, kv, laws._trunk, W, W))
+        close(J_com, plant.CalcJacobianCenterOfMassTranslationalVelocity(
+            ctx, laws._instances, kv, W, W))
+    free = MultibodyPlant(0.0)
+    ball = free.AddRigidBody("ball", SpatialInertia.SolidSphereWithMass(1.0, 0.1))
+    free.Finalize()  # a quaternion floating joint
+    assert TreeKinematics.of(free, free.CreateDefaultContext(), [ball.model_instance()],
+                             ball.body_frame(), ball.body_frame()) is None
 
 
 def test_without_numba_the_numpy_laws_give_the_same_forces():

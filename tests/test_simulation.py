@@ -435,3 +435,30 @@ def test_state_map_covers_all_discrete_states(params):
     # The body's softening: a running mean and variance per element.
     nx += 2 * model.systems["body_softening"].elements.n
     assert smap.size == nx
+
+
+def test_seat_forces_in_the_learnt_contact_order_are_the_ids_forces(params, settled_default,
+                                                                     monkeypatch):
+    """`SeatForces` reads each point contact's seat part from the geometry
+    ids until every candidate pair touches, then keeps that order (Drake
+    sorts the contacts by geometry ids): at every step of a run whose
+    contacts break and close again, its forces are those read from the
+    ids, bit for bit."""
+    from ehm_drake.systems.outputs import SeatForces
+
+    calc, counts = SeatForces._calc, []
+
+    def both(self, context, output):
+        calc(self, context, output)
+        learnt = output.get_value().copy()
+        kept = self._candidates, self._full_order
+        self._candidates, self._full_order = -1, None  # from the ids
+        calc(self, context, output)
+        self._candidates, self._full_order = kept
+        assert output.get_value().tobytes() == learnt.tobytes()
+        counts.append((self._contacts.Eval(context).num_point_pair_contacts(), self._candidates))
+
+    monkeypatch.setattr(SeatForces, "_calc", both)
+    _run(params, settled_default, "z", 7, duration=3.0, rms=6.0)
+    full = [n == c for n, c in counts]
+    assert sum(full) > 100 and not all(full), (len(full), sum(full))

@@ -1,12 +1,14 @@
 """`ForceLaws`' step compiled with numba (`ehm_drake.jit`).
 
-Two kernels do all of the step's arithmetic between Drake's kinematics
-calls, so that no NumPy operation runs per step on the compiled path:
+The kinematics' kernels (`ehm_drake.systems.compiled_kinematics`) and two
+more do all of the step, so that no Drake query or NumPy operation runs
+per step on the compiled path:
 `_probe_kernel`, the contact dampers' deepest points and normal
 displacements (`_ContactProbe` in NumPy), and `_step_kernel`, the rest
 (the Jacobian's rows assembled, the velocities, head-in-space, the
 projections, the elementwise laws of `_laws_kernel`, the sum mapped
-through the Jacobian).  `_laws_kernel` is the NumPy expressions of
+through the Jacobian, the restraints' force per seat part).  `_laws_kernel`
+is the NumPy expressions of
 `ehm_drake.systems.forces.ForceLaws._elementwise_laws` element by element
 in their order; the products, which NumPy hands to BLAS, are loops here,
 so the step's numbers are the NumPy step's to rounding
@@ -15,7 +17,8 @@ less in themselves and leave the CPU's caches and predictors to the
 plant's contact solve, which ran about 80 us slower after the NumPy step
 (`docs/history/`).  Used for float states with no separate controller
 input, on both designs (the ball joints' cosines, sines and tangents
-computed in NumPy); the kinematics stay in Drake.
+computed in NumPy); where the plant has a joint the kinematics' kernels do
+not know, the kinematics are Drake's.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 from pydrake.multibody.tree import JacobianWrtVariable
 
 from ..jit import available, kernel, maximum, minimum
+from .compiled_kinematics import TreeKinematics
 
 
 def _cardan_to_generalized(tau, ball, trig):
@@ -201,7 +205,7 @@ def _step_kernel(x, nq, A, p_cols, JJ, jp_rows, jc_rows, J_head, J_trunk, J_com,
                  his_kp, his_kd, R_ref_T, m_ptr, m_idx, m_val, m0, n_pt, mass, a, slip, z,
                  pos_n_contact, rot_v, v_index, ball, trig, axis_prm, point_prm, flags,
                  constraint_prm, contact_prm, pid_prm, rot_q, rot_v_x, passive_prm, q_index,
-                 v_x, period):
+                 v_x, period, seat, grouped_row):
     """`ForceLaws._calc_step` after the kinematics, compiled: the rows of
     J (the restraint points' rows `jp_rows` and the contact points' rows
     `jc_rows` of the probed Jacobian `JJ`, between them head, upper torso
@@ -210,7 +214,10 @@ def _step_kernel(x, nq, A, p_cols, JJ, jp_rows, jc_rows, J_head, J_trunk, J_com,
     elementwise laws (`_laws_kernel`), G and f = J^T G + the joints' PID
     and passive forces.  `A`'s columns `p_cols` are the restraint points'
     positions.  Returns (f, J, G, w, slip_next, fd, pid_force, pid_torque,
-    z_next, passive, his_torque, PV)."""
+    z_next, passive, his_torque, PV, seat_forces): the last the restraints'
+    and contact dampers' force per seat part (`seat`: the matrix of
+    `ForceLaws._out_seat_forces`, `grouped_row` the contact point of each
+    restraint point)."""
     nv = JJ.shape[1]
     n3, nc = jp_rows.shape[0], jc_rows.shape[0]
     rows = n3 + 9 + nc
@@ -275,7 +282,19 @@ def _step_kernel(x, nq, A, p_cols, JJ, jp_rows, jc_rows, J_head, J_trunk, J_com,
         f[rot_v[i]] += pid_force[i]
     for i in range(v_index.shape[0]):
         f[v_index[i]] += passive[i]
-    return f, J, G, w, slip_next, fd, pid_force, pid_torque, z_next, passive, tau, PV
+    n2 = 2 * n_pt
+    u = w[:n2 + n_pt].copy()  # tangential, then normal forces (+ the dampers')
+    if flags[4]:
+        for i in range(n_pt):
+            u[n2 + i] += fd[grouped_row[i]]
+    seat_forces = np.empty(seat.shape[0])
+    for r in range(seat.shape[0]):
+        acc = 0.0
+        for k in range(u.shape[0]):
+            acc += seat[r, k] * u[k]
+        seat_forces[r] = acc
+    return f, J, G, w, slip_next, fd, pid_force, pid_torque, z_next, passive, tau, PV, \
+        seat_forces
 
 
 #: The two step kernels compiled, or None without numba.
@@ -304,45 +323,87 @@ class StepStructure:
             self.jc_rows = np.zeros(0, np.int64)
         else:
             self.p_cols, self.jp_rows, self.jc_rows = probe.p_cols, probe.jp_rows, probe.jc_rows
+        # The kinematics compiled too where the kernels know every joint and
+        # the points are given in body frames.
+        groups = laws._geometry.groups
+        self.tree = None
+        if all(frame.index() == frame.body().body_frame().index() for frame, _, _ in groups):
+            self.tree = TreeKinematics.of(laws._scratch.plant, laws._scratch.context,
+                                          laws._instances, laws._head, laws._trunk)
+        if self.tree is not None:
+            body = [int(frame.body().index()) for frame, _, _ in groups]
+            if laws._contact_damping is None:  # positions and Jacobians of the points
+                self.probe = np.concatenate([P_B for _, P_B, _ in groups], axis=1)
+                self.probe_body = np.repeat(body, [P_B.shape[1] for _, P_B, _ in groups])
+                self.jac_body = self.probe_body
+            else:  # `_ContactProbe`'s probes, then its [P_B | C_B]
+                self.probe = np.concatenate(probe.probes, axis=1)
+                self.probe_body = np.repeat(body, [P.shape[1] for P in probe.probes])
+                self.jac_body = np.zeros(probe.points.shape[1], np.int64)
+                for b, cols in zip(body, probe.blocks, strict=True):
+                    self.jac_body[cols] = b
+            self.head_body = int(laws._head_body.index())
 
 
 def compiled_step(laws, context, s):
-    """`ForceLaws._calc_step` on the compiled path: Drake's kinematics, then
-    the two kernels; fills and returns the `_Step` `s`."""
+    """`ForceLaws._calc_step` on the compiled path: the kinematics (compiled,
+    or Drake's), then the two kernels; fills and returns the `_Step` `s`."""
     c = laws._constants.Eval(context)
     x = laws._state_port.Eval(context)
     st = laws._structure
     if st is None:
         st = laws._structure = StepStructure(laws)
-    p, W, kv = laws._scratch.plant, laws._world, JacobianWrtVariable.kV
-    ctx = laws._scratch.set_state(x)
-    R_WH = p.EvalBodyPoseInWorld(ctx, laws._head_body).rotation().matrix()
-    J_head = p.CalcJacobianAngularVelocity(ctx, kv, laws._head, W, W)
-    J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, laws._trunk, W, W)
-    J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, laws._instances, kv, W, W)
-    if laws._contact_damping is None:
-        groups = laws._geometry.groups
-        A = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
-                            for frame, P_B, _ in groups], axis=1)
-        JJ = np.concatenate([p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
-                             for frame, P_B, _ in groups])
-        pos_n_contact = NO_CONTACTS
+    ctx = laws._scratch.set_state(x)  # (the state the shared scratch holds: `share`)
+    if st.tree is not None:
+        R_WH, J_head, J_trunk, J_com, A, JJ, pos_n_contact = _compiled_kinematics(laws, st, x)
     else:
-        A, JJ, pos_n_contact = laws._probe.raw(p, ctx, W)
+        p, W, kv = laws._scratch.plant, laws._world, JacobianWrtVariable.kV
+        R_WH = p.EvalBodyPoseInWorld(ctx, laws._head_body).rotation().matrix()
+        J_head = p.CalcJacobianAngularVelocity(ctx, kv, laws._head, W, W)
+        J_trunk = p.CalcJacobianAngularVelocity(ctx, kv, laws._trunk, W, W)
+        J_com = p.CalcJacobianCenterOfMassTranslationalVelocity(ctx, laws._instances, kv, W, W)
+        if laws._contact_damping is None:
+            groups = laws._geometry.groups
+            A = np.concatenate([p.CalcPointsPositions(ctx, frame, P_B, W)
+                                for frame, P_B, _ in groups], axis=1)
+            JJ = np.concatenate([p.CalcJacobianTranslationalVelocity(ctx, kv, frame, P_B, W, W)
+                                 for frame, P_B, _ in groups])
+            pos_n_contact = NO_CONTACTS
+        else:
+            A, JJ, pos_n_contact = laws._probe.raw(p, ctx, W)
     ball, *packed = c.packed
     (s.f, s.J, s.G, s.w, s.slip_next, fd, s.pid_force, s.pid_torque, s.z_next,
-     s.passive_force, s.his_torque, PV) = compiled_step_kernel(
+     s.passive_force, s.his_torque, PV, s.seat_forces) = compiled_step_kernel(
         x, laws._nq, A, st.p_cols, JJ, st.jp_rows, st.jc_rows, J_head, J_trunk, J_com, R_WH,
         c.his_kp, c.his_kd, c.his_R_ref_T, st.m_ptr, st.m_idx, st.m_val, laws._m0,
         len(laws._points), laws._mass, laws._a_port.Eval(context),
         laws._discrete(context, laws._slip), laws._discrete(context, laws._z), pos_n_contact,
-        laws._layout.rot_v, laws._v_index, ball, ball_trigonometry(laws, x), *packed)
+        laws._layout.rot_v, laws._v_index, ball, ball_trigonometry(laws, x), *packed,
+        laws._seat, laws._geometry.grouped_row)
     if laws._contact_damping is not None:
         s.fd = fd
     n2 = 2 * len(laws._points)
     s.pos, s.pos_n = PV[:n2], PV[n2:n2 + len(laws._points)]
     s.J_his = None
     return s
+
+
+def _compiled_kinematics(laws, st, x):
+    """What `compiled_step` asks Drake for, from the compiled kinematics
+    (`TreeKinematics`): R_WH, the head's and upper torso's angular
+    Jacobians, the centre of mass's Jacobian, the probed positions, the
+    points' Jacobian and the contact points' normal displacements."""
+    tree = st.tree
+    R_WB, p_WB, w, o, t, A = tree.poses(x, st.probe, st.probe_body)
+    if laws._contact_damping is None:
+        points, pos_n_contact = st.probe, NO_CONTACTS
+    else:
+        probe = laws._probe
+        pos_n_contact = compiled_probe(A, probe.axis, probe.o_cols, probe.tip_cols, probe.p_BE,
+                                       probe.semi_axes, probe.n0, probe.points, probe.c_cols)
+        points = probe.points
+    JJ, J_head, J_trunk, J_com = tree.jacobians(R_WB, p_WB, w, o, t, points, st.jac_body)
+    return R_WB[st.head_body], J_head, J_trunk, J_com, A, JJ, pos_n_contact
 #: The contact points' normal displacements where there are no contact dampers.
 NO_CONTACTS = np.zeros(0)
 #: The ball joints' trigonometric terms on Cardan chains (none).

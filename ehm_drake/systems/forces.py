@@ -13,13 +13,12 @@ and the PID integral and the restraints' slip advance in one update event
 (the reference design at 1 ms: 2.0x -> 2.5x real time, 498 -> 401 us per
 step; the implicit design at 5 ms: 5.7-5.9x -> 8.3x).
 
-The laws are unchanged; the sum is ordered differently, so the forces
-differ from the five systems' sum by rounding only
-(`tests/test_force_laws.py` checks it to 1e-12 at random states).
+The laws are unchanged; the sum is ordered differently: the forces differ
+from the five systems' sum by rounding (tests: 1e-12 at random states).
 
-On float states with no separate controller input the step's arithmetic
-runs compiled (`ehm_drake.systems.compiled_laws`, numba: the same numbers to
-rounding), else in NumPy.
+On float states with no separate controller input the step runs compiled
+(`ehm_drake.systems.compiled_laws`, numba, and its kinematics
+`.compiled_kinematics`: the same numbers to rounding), else in NumPy.
 
 The parts keep their identities for the code that reads or changes them
 in a context (the static equilibrium, the gap diagnosis' families and
@@ -240,7 +239,7 @@ class _Step:
     the last rows of ``J``, as ``fd`` is the end of ``G``)."""
 
     __slots__ = ("f", "J", "G", "pid_torque", "pid_force", "passive_force", "his_torque",
-                 "J_his", "w", "pos", "pos_n", "z_next", "slip_next", "fd")
+                 "J_his", "w", "pos", "pos_n", "z_next", "slip_next", "fd", "seat_forces")
 
 
 @define_system("ForceLaws_", __name__)
@@ -656,8 +655,9 @@ def ForceLaws_(T):
 
         def _out_seat_forces(self, context, output):
             s = self._step.Eval(context)
-            n2 = 2 * len(self._points)
-            output.SetFromVector(self._seat @ np.concatenate([s.w[:n2], self._normal_forces(s)]))
+            n2 = 2 * len(self._points)  # (the compiled step's own product where compiled)
+            output.SetFromVector(s.seat_forces if self._compiled else
+                                 self._seat @ np.concatenate([s.w[:n2], self._normal_forces(s)]))
 
         def _out_point_forces(self, context, output):
             s = self._step.Eval(context)
