@@ -404,6 +404,8 @@ def _compiled_kinematics(laws, st, x):
         points = probe.points
     JJ, J_head, J_trunk, J_com = tree.jacobians(R_WB, p_WB, w, o, t, points, st.jac_body)
     return R_WB[st.head_body], J_head, J_trunk, J_com, A, JJ, pos_n_contact
+
+
 #: The contact points' normal displacements where there are no contact dampers.
 NO_CONTACTS = np.zeros(0)
 #: The ball joints' trigonometric terms on Cardan chains (none).
