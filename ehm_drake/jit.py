@@ -25,10 +25,13 @@ except ImportError:  # the NumPy laws serve
 
 
 def kernel(fn):
-    """`fn` compiled by numba (nopython, cache=True), or None without numba."""
+    """`fn` compiled by numba (nopython, cache=True), or None without numba.
+    A division by zero gives inf or NaN as in NumPy (numba's "numpy" error
+    model), never an exception: a diverging state reaches the divergence
+    guard as on the NumPy path."""
     if numba is None:
         return None
-    return numba.njit(cache=True, nogil=True)(fn)
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn)
 
 
 def available() -> bool:

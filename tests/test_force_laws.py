@@ -537,6 +537,23 @@ def test_the_compiled_kinematics_are_drakes(design):
                              ball.body_frame(), ball.body_frame()) is None
 
 
+def test_a_kernels_division_by_zero_is_nan_as_in_numpy():
+    """A diverging state can zero a denominator (the contact probe's
+    ellipsoid normal when the positions lose their digits): the compiled
+    kernels then give NaN, as NumPy does, for the divergence guard to
+    report, instead of raising ZeroDivisionError from inside a step."""
+    from ehm_drake import jit
+    from ehm_drake.systems.compiled_laws import compiled_probe
+
+    if not jit.available():
+        pytest.skip("the compiled laws are switched off (EHM_DRAKE_NO_JIT)")
+    A = np.zeros((3, 4))  # the body origin and its three unit tips in one place
+    pos_n = compiled_probe(A, np.array([2]), np.array([0]), np.array([[1, 2, 3]]),
+                           np.zeros((1, 3)), np.ones((1, 3)), np.zeros(1), np.zeros((3, 2)),
+                           np.array([1]))
+    assert np.isnan(pos_n).all()
+
+
 def test_without_numba_the_numpy_laws_give_the_same_forces():
     """With EHM_DRAKE_NO_JIT=1 (as where numba is not installed) nothing is
     compiled and the default implicit model's forces are those of the

@@ -127,10 +127,11 @@ def test_the_compiled_spring_is_the_law(monkeypatch):
     assert jit.available() or os.environ.get("EHM_DRAKE_NO_JIT", "") not in ("", "0")
 
 
-def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
+def test_the_softening_reads_the_restraints_kinematics(default_at_rest):
     # The tissue points' normal displacements and Jacobian rows taken from
     # what the force laws computed at the state are the ones the softening
-    # computes itself, bit for bit, at a moved state.
+    # computes itself at a moved state: to rounding (the laws' kinematics
+    # are compiled, `TreeKinematics`; the softening's own are Drake's).
     model, ctx = default_at_rest
     ctx = ctx.Clone()
     plant = model.plant
@@ -147,8 +148,9 @@ def test_the_softening_reads_the_restraints_kinematics_exactly(default_at_rest):
     d_shared, J_shared, _ = soft._calc_deformation_kin(sctx)
     soft._scratch.share("restraint normals", None)
     d_own, J_own, _ = soft._calc_deformation_kin(sctx)
-    assert np.array_equal(d_shared, d_own) and np.array_equal(J_shared, J_own)
-    assert np.any(J_own != 0)
+    np.testing.assert_allclose(d_shared, d_own, rtol=0, atol=1e-15)  # (m; d ~ 1e-2)
+    np.testing.assert_allclose(J_shared, J_own, rtol=0, atol=1e-14)  # (entries ~ 1)
+    assert np.any(J_own != 0) and np.max(np.abs(d_own)) > 1e-3
     # Points measured from other anchors are not taken for its own.
     rows = dict(laws._point_rows)
     name = soft._args[3][0].name
