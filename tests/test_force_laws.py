@@ -469,17 +469,25 @@ def test_the_compiled_step_is_the_numpy_step(design, branches):
         lctx.SetDiscreteState(laws.views["shear_restraints"].slip_state_index,
                               rng.normal(scale=2e-3, size=2 * n))
         a, b = _step_both_ways(laws, lctx)
+        tree, laws._structure.tree = laws._structure.tree, None  # Drake's kinematics
+        drake, _ = _step_both_ways(laws, lctx)
+        laws._structure.tree = tree
+        assert tree is not None
         names = ["f", "w", "slip_next", "z_next", "pid_force", "pid_torque", "passive_force",
                  "his_torque", "pos", "pos_n"]
-        for name in names + (["fd"] if design == "implicit" else []):
-            want = getattr(b, name)
-            np.testing.assert_allclose(getattr(a, name), want, rtol=0, err_msg=name,
-                                       atol=1e-12 * max(1.0, np.max(np.abs(want))))
-        np.testing.assert_allclose(a.J, b.J, rtol=0, atol=1e-12 * np.max(np.abs(b.J)))
         seat = laws._seat @ np.concatenate([b.w[:2 * n], laws._normal_forces(b)])
-        np.testing.assert_allclose(a.seat_forces, seat, rtol=0,
-                                   atol=1e-12 * max(1.0, np.max(np.abs(seat))))
-        np.testing.assert_allclose(a.G, b.G, rtol=0, atol=1e-12 * np.max(np.abs(b.G)))
+        for compiled in (a, drake):  # the compiled step on either kinematics
+            for name in names + (["fd"] if design == "implicit" else []):
+                want = getattr(b, name)
+                np.testing.assert_allclose(getattr(compiled, name), want, rtol=0, err_msg=name,
+                                           atol=1e-12 * max(1.0, np.max(np.abs(want))))
+            np.testing.assert_allclose(compiled.J, b.J, rtol=0,
+                                       atol=1e-12 * np.max(np.abs(b.J)))
+            np.testing.assert_allclose(compiled.seat_forces, seat, rtol=0,
+                                       atol=1e-12 * max(1.0, np.max(np.abs(seat))))
+            np.testing.assert_allclose(compiled.G, b.G, rtol=0,
+                                       atol=1e-12 * np.max(np.abs(b.G)))
+        np.testing.assert_array_equal(drake.J, b.J)  # Drake's calls, as the NumPy step's
         assert np.any(a.slip_next != 0)
         assert np.any(a.fd != 0) if design == "implicit" else len(laws._ball.roll) > 0
 

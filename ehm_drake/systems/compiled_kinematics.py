@@ -128,10 +128,7 @@ def _poses_kernel(q, jtype, parent, child, R_PF, p_PF, R_MC, p_MC, axis, q0, v0,
         _mv(R_WM, p_MC[j], p_WM, p_WB[C])
     A = np.empty((3, probe.shape[1]))
     for c in range(probe.shape[1]):
-        b = probe_body[c]
-        for i in range(3):
-            A[i, c] = p_WB[b, i] + (R_WB[b, i, 0] * probe[0, c] + R_WB[b, i, 1] * probe[1, c]
-                                    + R_WB[b, i, 2] * probe[2, c])
+        _mv(R_WB[probe_body[c]], probe[:, c], p_WB[probe_body[c]], A[:, c])
     return R_WB, p_WB, w, o, t, A
 
 
@@ -150,9 +147,7 @@ def _jacobians_kernel(R_WB, p_WB, w, o, t, on_path, points, point_body, head, tr
     p = np.empty(3)
     for c in range(m):
         b = point_body[c]
-        for i in range(3):
-            p[i] = p_WB[b, i] + (R_WB[b, i, 0] * points[0, c] + R_WB[b, i, 1] * points[1, c]
-                                 + R_WB[b, i, 2] * points[2, c])
+        _mv(R_WB[b], points[:, c], p_WB[b], p)
         for k in range(nv):
             if on_path[b, k]:
                 r0, r1, r2 = p[0] - o[k, 0], p[1] - o[k, 1], p[2] - o[k, 2]

@@ -342,7 +342,6 @@ class StepStructure:
                 self.jac_body = np.zeros(probe.points.shape[1], np.int64)
                 for b, cols in zip(body, probe.blocks, strict=True):
                     self.jac_body[cols] = b
-            self.head_body = int(laws._head_body.index())
 
 
 def compiled_step(laws, context, s):
@@ -403,7 +402,7 @@ def _compiled_kinematics(laws, st, x):
                                        probe.semi_axes, probe.n0, probe.points, probe.c_cols)
         points = probe.points
     JJ, J_head, J_trunk, J_com = tree.jacobians(R_WB, p_WB, w, o, t, points, st.jac_body)
-    return R_WB[st.head_body], J_head, J_trunk, J_com, A, JJ, pos_n_contact
+    return R_WB[tree.head], J_head, J_trunk, J_com, A, JJ, pos_n_contact
 
 
 #: The contact points' normal displacements where there are no contact dampers.
