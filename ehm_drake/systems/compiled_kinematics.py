@@ -66,6 +66,16 @@ def _mv(A, v, p, out):
         out[i] = p[i] + (A[i, 0] * v[0] + A[i, 1] * v[1] + A[i, 2] * v[2])
 
 
+def _add_column(w, o, t, k, p, scale, J, row):
+    """J[row:row + 3, k] += scale (w_k x (p - o_k) + t_k): the velocity of
+    the point p per unit speed of mobility k (w_k, t_k its angular and
+    translational velocity per unit speed, o_k its origin), weighted."""
+    r0, r1, r2 = p[0] - o[k, 0], p[1] - o[k, 1], p[2] - o[k, 2]
+    J[row, k] += scale * (w[k, 1] * r2 - w[k, 2] * r1 + t[k, 0])
+    J[row + 1, k] += scale * (w[k, 2] * r0 - w[k, 0] * r2 + t[k, 1])
+    J[row + 2, k] += scale * (w[k, 0] * r1 - w[k, 1] * r0 + t[k, 2])
+
+
 def _poses_kernel(q, jtype, parent, child, R_PF, p_PF, R_MC, p_MC, axis, q0, v0, nb, nv,
                   probe, probe_body):
     """Forward kinematics at q: the bodies' poses (R_WB, nb x 3 x 3; p_WB,
@@ -150,10 +160,7 @@ def _jacobians_kernel(R_WB, p_WB, w, o, t, on_path, points, point_body, head, tr
         _mv(R_WB[b], points[:, c], p_WB[b], p)
         for k in range(nv):
             if on_path[b, k]:
-                r0, r1, r2 = p[0] - o[k, 0], p[1] - o[k, 1], p[2] - o[k, 2]
-                JJ[3 * c, k] = w[k, 1] * r2 - w[k, 2] * r1 + t[k, 0]
-                JJ[3 * c + 1, k] = w[k, 2] * r0 - w[k, 0] * r2 + t[k, 1]
-                JJ[3 * c + 2, k] = w[k, 0] * r1 - w[k, 1] * r0 + t[k, 2]
+                _add_column(w, o, t, k, p, 1.0, JJ, 3 * c)
     J_head = np.zeros((3, nv))
     J_trunk = np.zeros((3, nv))
     for k in range(nv):
@@ -168,10 +175,7 @@ def _jacobians_kernel(R_WB, p_WB, w, o, t, on_path, points, point_body, head, tr
         _mv(R_WB[b], p_BBcm[b], p_WB[b], p)
         for k in range(nv):
             if on_path[b, k]:
-                r0, r1, r2 = p[0] - o[k, 0], p[1] - o[k, 1], p[2] - o[k, 2]
-                J_com[0, k] += mass[b] * (w[k, 1] * r2 - w[k, 2] * r1 + t[k, 0])
-                J_com[1, k] += mass[b] * (w[k, 2] * r0 - w[k, 0] * r2 + t[k, 1])
-                J_com[2, k] += mass[b] * (w[k, 0] * r1 - w[k, 1] * r0 + t[k, 2])
+                _add_column(w, o, t, k, p, mass[b], J_com, 0)
     for i in range(3):
         for k in range(nv):
             J_com[i, k] /= total_mass
@@ -180,6 +184,7 @@ def _jacobians_kernel(R_WB, p_WB, w, o, t, on_path, points, point_body, head, tr
 
 if kernel(_mm) is not None:  # (called by the compiled kernels: compiled too)
     _rpy, _angle_axis, _mm, _mv = kernel(_rpy), kernel(_angle_axis), kernel(_mm), kernel(_mv)
+    _add_column = kernel(_add_column)
 poses_kernel = kernel(_poses_kernel) or _poses_kernel
 jacobians_kernel = kernel(_jacobians_kernel) or _jacobians_kernel
 
