@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from ...model.softening import equivalent_loss, loss_fraction, tissue_element_set
+from ...model.softening import TISSUE_PAIRS, equivalent_loss, loss_fraction, tissue_element_set
 from ...params import params_from_dict
 from ..single.localize import Rows
 from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, EffectParam
@@ -287,8 +287,10 @@ EQUIVALENT_TOL = 1e-3
 #: change, at most this many times per statistics update.
 SOFTENING_TOLERANCE = 2e-3
 SOFTENING_ITERATIONS = 25
-#: Restraint groups whose tissue softens, and the contact pair of each group.
-TISSUE_GROUPS = ("pelvis", "thighs", "lower_pad", "upper_pad")
+#: Restraint groups whose tissue softens (the model's `TISSUE_PAIRS`, whose
+#: points the time-domain `softening` candidate also takes), and the contact
+#: pair of each group.
+TISSUE_GROUPS = tuple(RESTRAINT_GROUPS[p] for p in TISSUE_PAIRS)
 RESTRAINT_PAIRS = {g: p for p, g in RESTRAINT_GROUPS.items()}
 #: Slip relaxation rates below this (1/s) are taken as zero: slower than the
 #: lowest analysed frequency by two decades.
