@@ -123,6 +123,20 @@ def pin_blas_threads() -> int | None:
     return n
 
 
+def check_not_starting_worker(what: str) -> None:
+    """Raise a clear error when `what` is called while this process starts
+    as a pool worker.  A worker re-runs the top level of the script that
+    made its pool; in a script without an ``if __name__ == "__main__":``
+    guard that top level calls the package again, which could wait forever
+    on a lock the script holds (the linear families' cache) instead of
+    failing."""
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        raise RuntimeError(
+            f"{what} was called while a worker process was starting: the script "
+            "that uses ehm_drake's parallel functions must guard its entry point with "
+            "`if __name__ == \"__main__\":` (each worker re-runs the script's top level)")
+
+
 def worker_count(workers: int | None = None) -> int:
     """`workers`, or the machine's cores; between 1 and 8."""
     return max(1, min(workers or (os.cpu_count() or 1), 8))
@@ -164,7 +178,13 @@ def run_jobs(jobs, workers: int | None = None, progress=None, initializer=None,
         futs = {pool.submit(fn, arg): i for i, (fn, arg) in enumerate(jobs)}
         for done, f in enumerate(cf.as_completed(futs), 1):
             i = futs[f]
-            results[i] = f.result()
+            try:
+                results[i] = f.result()
+            except cf.process.BrokenProcessPool as e:
+                raise RuntimeError(
+                    "a worker process ended abruptly (killed, out of memory, or started "
+                    "by a script without an `if __name__ == \"__main__\":` guard, whose "
+                    "top level each worker re-runs)") from e
             if progress:
                 progress(done, len(jobs), i, results[i])
     except BaseException:

@@ -141,3 +141,32 @@ def test_workers_end_when_their_caller_is_killed(tmp_path, method):
     for p in left:  # (do not leave them behind when the test fails)
         os.kill(p, signal.SIGKILL)
     assert not left, f"workers {left} outlived their killed caller"
+
+
+_UNGUARDED = """
+import os, sys
+from ehm_drake.gap.single.diagnose import load_families
+from ehm_drake.model.anthropometry import REFERENCE
+from ehm_drake.params import load_params
+
+# No `if __name__ == "__main__":` guard: each worker re-runs this line.
+load_families(load_params(), REFERENCE, ["reflex_delay"], ["lumbar_stiffness"], workers=2)
+"""
+
+
+@pytest.mark.skipif(os.name != "posix", reason="the cache's lock is POSIX's")
+def test_an_unguarded_script_fails_clearly_instead_of_waiting_forever(tmp_path):
+    """A script that builds the linear families at its top level, with no
+    entry-point guard: its workers re-run that line while the script holds
+    the cache's lock.  It ends with an error that names the guard (it waited
+    forever before: the workers for the lock, the script for its workers)."""
+    import subprocess
+
+    script = tmp_path / "unguarded.py"
+    script.write_text(_UNGUARDED)
+    env = {**os.environ, "EHM_DRAKE_CACHE": str(tmp_path / "cache")}
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=300, env=env, cwd=tmp_path)
+    assert run.returncode != 0
+    assert 'if __name__ == "__main__":' in run.stderr
+    assert "worker process" in run.stderr

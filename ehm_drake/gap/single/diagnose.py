@@ -78,7 +78,7 @@ from ...analysis.formats import (
 )
 from ...identification.parameters import resolve_free
 from ...model.anthropometry import REFERENCE, BodyMeasures
-from ...parallel import run_jobs, worker_count
+from ...parallel import check_not_starting_worker, run_jobs, worker_count
 from ...params import ModelParams, load_params
 from ...progress import Progress
 from ..library.effects import EFFECT_NAMES, EFFECTS
@@ -239,6 +239,7 @@ def load_families(params: ModelParams, measures: BodyMeasures, effect_names, bas
                   workers: int | None = None, progress=None, use_cache: bool = True) -> dict:
     """The linear families (base + grid effects) and the static separation
     slope, from the cache or computed (and cached)."""
+    check_not_starting_worker("the linear families' build")
     specs = family_specs(effect_names)
     cdir = cache_dir() / "families"
     if not use_cache:
