@@ -144,7 +144,6 @@ def test_workers_end_when_their_caller_is_killed(tmp_path, method):
 
 
 _UNGUARDED = """
-import os, sys
 from ehm_drake.gap.single.diagnose import load_families
 from ehm_drake.model.anthropometry import REFERENCE
 from ehm_drake.params import load_params
