@@ -443,8 +443,8 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     base_names = [f.name for f in resolve_free("default")]
 
     t0 = time.perf_counter()
-    anchor_prog = Progress("diagnose: model refit to the group", ANCHOR_ITERATIONS, progress,
-                           unit="linearizations")
+    anchor_prog = Progress("diagnose: model refit to the group", ANCHOR_ITERATIONS - 1,
+                           progress, unit="steps")
     anchor = fit_anchor(group, params, measures, workers=workers,
                         progress=lambda k, n, b, a: anchor_prog.step(f"(cost {b:.3g} -> {a:.3g})"),
                         use_cache=use_cache)
