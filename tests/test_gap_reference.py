@@ -1244,3 +1244,47 @@ def test_a_candidate_held_back_by_the_family_wise_test_is_said():
     assert note.startswith("visceral_mass exceeds its own bound (538 against 344)")
     assert "1.91 against 3.26" in note
     assert held_back_note(ranking[2:], fam) is None
+
+
+def test_the_anchor_fit_keeps_only_steps_that_lower_the_true_cost():
+    """`anchor.trust_region_descent` on a cost whose local (Gauss-Newton)
+    model overshoots: f(x) = sum (1 - exp(-a x_i))^2 about x = 3, a sharp
+    valley the linear model badly predicts far from its point.  Every kept
+    step lowers the true cost, an overshooting step is taken back with the
+    region halved, and the descent ends at the best point it saw, near the
+    minimum at 0.  Without the check (a free step, as the anchor fit once
+    took) the first step already raises the cost."""
+    from types import SimpleNamespace
+
+    from ehm_drake.gap.reference_group.anchor import trust_region_descent
+
+    a = np.array([1.0, 3.0])
+
+    def residual(x):
+        return 1.0 - np.exp(-a * x)
+
+    def linearize(x):
+        return SimpleNamespace(x=np.array(x, float), cost=float(np.sum(residual(x) ** 2)))
+
+    def step(point, trust, clip=True):
+        r, J = residual(point.x), np.diag(a * np.exp(-a * point.x))
+        dx = -np.linalg.solve(J, r)  # the local model's minimum
+        if clip:
+            dx = np.clip(dx, -trust, trust)
+        return dx, float(np.sum((r + J @ dx) ** 2))
+
+    (best, x), history = trust_region_descent(linearize, step, np.full(2, 3.0),
+                                              iterations=30, trust=8.0, min_trust=1e-3,
+                                              tolerance=1e-6)
+    assert np.array_equal(best.x, x)
+    kept = [h for h in history if h[2] < h[0]]
+    rejected = [h for h in history if h[2] >= h[0]]
+    assert rejected and kept  # the region had to shrink at least once
+    costs = [history[0][0]] + [h[2] for h in kept]
+    assert all(b < c for b, c in zip(costs[1:], costs[:-1], strict=True))
+    assert best.cost == min(costs) < 1e-3 * history[0][0]
+    assert np.max(np.abs(x)) < 0.05
+    # The unchecked Newton steps from the same start: the cost rises.
+    start = linearize(np.full(2, 3.0))
+    with np.errstate(over="ignore"):
+        assert linearize(start.x + step(start, None, clip=False)[0]).cost > start.cost

@@ -73,10 +73,9 @@ class _BoundedPredictor(Predictor):
 
 @dataclasses.dataclass
 class _Point:
-    """The model linearized at log-scales `total`, and the anchor fit's
+    """The model linearized at a point of the anchor fit, and the fit's
     true cost there (the data's share of the weighted squared error)."""
 
-    total: np.ndarray
     fams: dict
     statics: Statics
     bounds: np.ndarray  # (n, 2) physiological scale bounds about the point
@@ -91,6 +90,38 @@ class _Point:
                                  self.statics, scale_lo=lo, scale_hi=hi)
         pred.update_statistics(np.zeros(len(base_names)))
         return pred
+
+
+def trust_region_descent(linearize, step, x0, iterations: int = ANCHOR_ITERATIONS,
+                         trust: float = ANCHOR_TRUST, min_trust: float = ANCHOR_MIN_TRUST,
+                         tolerance: float = ANCHOR_TOLERANCE, progress=None):
+    """Descend a cost through local models, keeping a step only where the
+    true cost falls.  `linearize(x)` -> a point with its true ``cost`` at
+    `x` (one linearization); `step(point, trust)` -> (increment, the local
+    model's cost after it), each coordinate of the increment within
+    `trust`.  A step that does not lower the true cost is taken back and
+    `trust` halved; the descent ends when a kept step gains less than
+    `tolerance` of the cost, `trust` falls below `min_trust`, or after
+    `iterations` linearizations.  Returns (the best point, its x) and the
+    history [(true cost before a step, local model's after, true after)]."""
+    x = np.asarray(x0, float)
+    best, history = linearize(x), []
+    for k in range(iterations - 1):
+        dx, predicted = step(best, trust)
+        new = linearize(x + dx)
+        history.append([best.cost, predicted, new.cost])
+        if progress:
+            progress(k + 1, iterations - 1, best.cost, min(best.cost, new.cost))
+        if new.cost < best.cost:
+            gain = best.cost - new.cost
+            best, x = new, x + dx
+            if gain < tolerance * (best.cost + gain):
+                break
+        else:  # the local model overshot: a smaller region from the same point
+            trust *= 0.5
+            if trust < min_trust:
+                break
+    return (best, x), history
 
 
 def _data_cost(pred, theta, every, n_rows: int) -> float:
@@ -126,32 +157,19 @@ def fit_anchor(group, params: ModelParams, measures: BodyMeasures,
     def linearized(total) -> _Point:
         pk = apply_scales(params, free, np.exp(total))
         fams = load_families(pk, measures, [], base_names, workers, None, use_cache)
-        point = _Point(total, fams, Statics(fams["base"].family.info,
-                                            separation_slope(pk, measures)),
+        point = _Point(fams, Statics(fams["base"].family.info, separation_slope(pk, measures)),
                        np.array([scale_bounds(pk, f) for f in free]), np.nan)
         point.cost = _data_cost(point.predictor(rows, group.tests, base_names, ANCHOR_TRUST),
                                 zero, every, len(rows))
         return point
 
-    best, trust, history = linearized(zero), ANCHOR_TRUST, []
-    for k in range(iterations - 1):
-        pred = best.predictor(rows, group.tests, base_names, trust)
+    def step(point, trust):
+        pred = point.predictor(rows, group.tests, base_names, trust)
         fit = fit_candidate(pred, every, zero)
-        after = _data_cost(pred, fit.theta, every, len(rows))
-        new = linearized(best.total + fit.theta)
-        history.append([best.cost, after, new.cost])
-        if progress:
-            progress(k + 1, iterations - 1, best.cost, min(best.cost, new.cost))
-        if new.cost < best.cost:
-            gain = best.cost - new.cost
-            best = new
-            if gain < ANCHOR_TOLERANCE * (best.cost + gain):
-                break
-        else:  # the linear step overshot: a smaller region from the same point
-            trust *= 0.5
-            if trust < ANCHOR_MIN_TRUST:
-                break
-    total = best.total
+        return fit.theta, _data_cost(pred, fit.theta, every, len(rows))
+
+    (_, total), history = trust_region_descent(linearized, step, zero, iterations,
+                                               progress=progress)
     out = {"log_scales": total.tolist(), "history": history, "base_names": base_names}
     if use_cache:
         write_cache_json(path, out)
