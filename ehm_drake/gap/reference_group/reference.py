@@ -12,8 +12,9 @@ with the group; the model gives only the *shape* of each candidate effect:
    the K subjects (gain and phase, as one complex number), the deviations
    of each subject from it, and their variance smoothed over 5 bins.
 2. The anchor: the model's base parameters (the default 20, within their
-   physiological bounds) refit to the group mean, re-linearized at each
-   iteration (`anchor.fit_anchor`), so that the effect signatures are those
+   physiological bounds) refit to the group mean, re-linearized after each
+   step and a step kept only where it fits better (`anchor.fit_anchor`),
+   so that the effect signatures are those
    of a model that resonates where the group does.  What the anchor still
    misses is the model-form gap; the report says where it lies
    (`model_form`).
