@@ -449,6 +449,7 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     anchor = fit_anchor(group, params, measures, workers=workers,
                         progress=lambda k, n, b, a: anchor_prog.step(f"(cost {b:.3g} -> {a:.3g})"),
                         use_cache=use_cache)
+    anchor_prog.close()  # (the fit may end before its last step)
     fam_prog = Progress("diagnose: linearizing the candidate models at the anchor", None,
                         progress, unit="models")
 
