@@ -81,7 +81,7 @@ def _add_model_arguments(p: argparse.ArgumentParser) -> None:
                    help="sitting height (m); default scales with stature")
     p.add_argument("--contact", choices=("point", "hydroelastic"),
                    help="contact model (default: from the parameters, point)")
-    add_design_arguments(p, implicit_default=True)
+    add_design_arguments(p)
 
 
 def _load_model_params(args, simulates: bool = True):

@@ -65,15 +65,11 @@ def csv_floats(name: str):
     return parse
 
 
-def add_design_arguments(p: argparse.ArgumentParser, implicit_default: bool = False) -> None:
+def add_design_arguments(p: argparse.ArgumentParser) -> None:
     """``--design`` and ``--time-step``: how the model's joints are built and
-    its step (resolved by `ehm_drake.diagram.on_design`).  `implicit_default`:
-    the command runs the implicit design unless told otherwise
-    (`params.command_design`: simulate, validate, modes, fit); the gap
-    diagnosis keeps the parameters' design, on which its calibrations were
-    measured."""
-    default = ("implicit, or the --params file's if it states its design or step"
-               if implicit_default else "from the parameters, reference")
+    its step (resolved by `ehm_drake.diagram.on_design`).  Every command runs
+    the implicit design unless told otherwise (`params.command_design`)."""
+    default = "implicit, or the --params file's if it states its design or step"
     p.add_argument("--design", choices=("reference", "implicit"),
                    help=f"joint design (default: {default}): implicit = Cardan joint chains, "
                    "stiff feedback in the implicit solve, a step chosen by accuracy (5 ms; "

@@ -309,6 +309,35 @@ def test_diagnosing_a_simulation_of_another_design_says_so(sim_dir, params, tmp_
     assert _design_caution(args(lab), with_design(params, other)) is None
 
 
+def test_the_gap_commands_run_the_implicit_design_unless_told(tmp_path):
+    """`diagnose`, `synth` and `blind` give their model the implicit design
+    at its accurate step (5 ms for the default body) like every command;
+    `--design reference` the paper's 1 ms design; a parameter file that
+    states its step keeps it; `synth` on an independent reality has no model."""
+    from ehm_drake.cli import build_parser
+    from ehm_drake.gap.commands import _command_params, _model_params
+
+    parser = build_parser()
+
+    def resolved(*argv):
+        return _command_params(parser.parse_args(list(argv)))
+
+    for cmd in (["diagnose", "data"], ["synth", "--effect", "none", "--seed", "1",
+                                         "--key", "k.json"],
+                ["blind", "--trials", "1", "--seed", "1"]):
+        sim = resolved(*cmd, "--out", "o").simulation
+        assert (sim.design, sim.time_step_s) == ("implicit", 0.005), cmd
+        sim = resolved(*cmd, "--out", "o", "--design", "reference").simulation
+        assert (sim.design, sim.time_step_s) == ("reference", 0.001), cmd
+    stepped = tmp_path / "stepped.yaml"
+    stepped.write_text("simulation:\n  time_step_s: 0.0005\n")
+    sim = resolved("diagnose", "data", "--out", "o", "--params", str(stepped)).simulation
+    assert (sim.design, sim.time_step_s) == ("reference", 0.0005)
+    args = parser.parse_args(["synth", "--effect", "none", "--seed", "1", "--key", "k.json",
+                              "--out", "o", "--reality", "lumped"])
+    assert _model_params(args, False) is None
+
+
 def test_the_paths_the_summary_leaves_out_are_zero_in_the_model(params):
     """The printed summary leaves out the midline segments' paths that the
     body's left-right symmetry makes zero (with axes excited together their

@@ -150,8 +150,11 @@ def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, t
     peak = 2j * 0.08 * r / (1 - r**2 + 2j * 0.08 * r)
     frf.gain[chan] = frf.gain[chan] * np.abs(1.0 + 1.0 * peak)[chan]
     frf.to_csv(data / "frf.csv")
+    # The blind run's data come from the Python API's defaults (the paper's
+    # design): the model that diagnoses them is put on the same design.
     assert main(["diagnose", str(data), "--out", str(tmp_path / "d"), "--quiet",
-                 "--workers", "2", "--effects", ",".join(CANDIDATES)]) == 0
+                 "--design", "reference", "--workers", "2",
+                 "--effects", ",".join(CANDIDATES)]) == 0
     rep = json.loads((tmp_path / "d" / "report.json").read_text())
     assert rep["verdict"] == "unexplained"
     assert rep["best_effect"] is None
@@ -160,6 +163,27 @@ def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, t
         ("z", "head", "z", 8.0)
     sig = [c for c in rep["localization"] if c["significant"]]
     assert all((c["segment"], c["dof"]) == ("head", "z") for c in sig)
+
+
+def test_a_run_of_the_other_design_is_refused_with_the_option_that_resumes_it(tmp_path):
+    """A blind folder made on the paper's design (the defaults before the
+    commands moved to the implicit one) is not resumed on the implicit design:
+    the error names the setting and the option that resumes it, before any
+    trial is made."""
+    from dataclasses import asdict
+
+    from ehm_drake.diagram import on_design
+    from ehm_drake.gap.lab.blind import BlindError, BlindSpec, run_blind
+    from ehm_drake.params import load_params
+
+    old = BlindSpec(**SHORT_BLIND)
+    settings = {k: v for k, v in asdict(old).items() if k not in ("workers", "extra")}
+    (tmp_path / "blind_settings.json").write_text(json.dumps(settings))
+    implicit = on_design(load_params(), "implicit").to_dict()
+    with pytest.raises(BlindError, match=r"other settings \(params\) \(it ran the reference "
+                       r"design: --design reference resumes it\)"):
+        run_blind(BlindSpec(**SHORT_BLIND, params=implicit), tmp_path, progress=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blind_settings.json"]
 
 
 def test_trial_fractions_that_cannot_add_up_are_refused_with_the_fix():
@@ -208,7 +232,8 @@ def test_a_blind_run_on_the_implicit_design_makes_and_diagnoses_its_data_there(t
     assert rep["params_file"] == str(tmp_path / "params.json")
     assert rep["simulation"] == {"design": "implicit", "time_step_s": 0.005}
     assert "the implicit design at a 5 ms step" in (tmp_path / "blind.md").read_text()
-    with pytest.raises(BlindError, match="other settings"):
+    with pytest.raises(BlindError, match=r"other settings \(params\) \(it ran the implicit "
+                       r"design: --design implicit resumes it\)"):
         run_blind(BlindSpec(**settings, workers=2), tmp_path, progress=False)
 
 

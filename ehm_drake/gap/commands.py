@@ -148,12 +148,10 @@ def _directions(text: str) -> str:
 
 
 def cmd_diagnose(args) -> int:
-    from ..diagram import on_design
-    from ..params import load_params
     from .report import write_report
     from .single.diagnose import diagnose
 
-    params = on_design(load_params(args.params), args.design, args.time_step)
+    params = _command_params(args)
     out = prepare_output_dir(args.out, args.force)
     if args.contrasts and not args.reference:
         raise UsageError("--contrasts needs --reference (the contrasts are measurements of "
@@ -225,23 +223,32 @@ def _design_caution(args, params) -> str | None:
     # (The designs' linear responses: docs/designs.md, and the fit's bias
     # when one design's data are fitted on the other.)
     return (f"{args.data} was simulated by ehm-drake on the {design} design; the diagnosis's "
-            f"model runs the {ours} design (on which its rules were calibrated), whose "
+            f"model runs the {ours} design, whose "
             "response differs from it by 0.2-4%, a gap the candidates then fit: to diagnose "
             f"the model against its own data, give --design {design}")
 
 
-def _model_params(args, data_from_model: bool):
+def _command_params(args):
     """The model's parameters given by ``--params``, ``--design`` and
-    ``--time-step`` (None when none of them is: the defaults)."""
-    if args.params is None and args.design is None and args.time_step is None:
-        return None
-    if not data_from_model:
+    ``--time-step``, on the design the commands run when none is named
+    (`params.command_design`: the implicit design at its accurate step)."""
+    from ..diagram import on_design
+    from ..params import command_design, load_params
+
+    return on_design(load_params(args.params), command_design(args.params, args.design),
+                     args.time_step)
+
+
+def _model_params(args, data_from_model: bool):
+    """The model's parameters (`_command_params`) where the model makes the
+    data or diagnoses it; None for `synth` on an independent reality, whose
+    data come from its own simulation (naming the model's then is an error)."""
+    if data_from_model:
+        return _command_params(args)
+    if args.params is not None or args.design is not None or args.time_step is not None:
         raise UsageError(f"--params, --design and --time-step set the model; the data of "
                          f"--reality {args.reality} come from that reality's own simulation")
-    from ..diagram import on_design
-    from ..params import load_params
-
-    return on_design(load_params(args.params), args.design, args.time_step)
+    return None
 
 
 def cmd_synth(args) -> int:

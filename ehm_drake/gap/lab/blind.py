@@ -272,6 +272,16 @@ def _diagnose_subprocess(data: Path, out: Path, spec: BlindSpec, log: Path,
         return subprocess.call(cmd, stdout=f, stderr=subprocess.STDOUT)
 
 
+def _design_of(params: dict | None) -> str:
+    """The model design of a run's stored parameters (None: the packaged
+    defaults, the paper's design)."""
+    if params is None:
+        from ...params import load_params
+
+        return load_params().simulation.design
+    return (params.get("simulation") or {}).get("design", "reference")
+
+
 def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     """Run (or resume) the blind trials into `out`; the summary."""
     spec.validate()
@@ -284,9 +294,15 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         old = {"reality": MODEL_REALITY, "references": 0, "params": None, "contrasts": 0,
                "c3d": False,
                **json.loads(sfile.read_text())}
-        if {k: v for k, v in old.items() if k != "trials"} != \
-                {k: v for k, v in settings.items() if k != "trials"}:
-            raise BlindError(f"{out} holds a blind run with other settings; use another --out")
+        differ = sorted(k for k in set(old) | set(settings)
+                        if k != "trials" and old.get(k) != settings.get(k))
+        if differ:
+            hint = ""
+            was, now = _design_of(old.get("params")), _design_of(settings.get("params"))
+            if was != now:
+                hint = f" (it ran the {was} design: --design {was} resumes it)"
+            raise BlindError(f"{out} holds a blind run with other settings "
+                             f"({', '.join(differ)}){hint}; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
     params = spec.model_params()
     if params is not None:
