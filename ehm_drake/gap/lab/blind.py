@@ -300,7 +300,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             hint = ""
             was, now = _design_of(old.get("params")), _design_of(settings.get("params"))
             if was != now:
-                hint = f" (it ran the {was} design: --design {was} resumes it)"
+                hint = f" (it ran the {was} design: --design {was})"
             raise BlindError(f"{out} holds a blind run with other settings "
                              f"({', '.join(differ)}){hint}; use another --out")
     sfile.write_text(json.dumps(settings, indent=1) + "\n")
