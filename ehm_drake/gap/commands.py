@@ -223,8 +223,8 @@ def _design_caution(args, params) -> str | None:
     # (The designs' linear responses: docs/designs.md, and the fit's bias
     # when one design's data are fitted on the other.)
     return (f"{args.data} was simulated by ehm-drake on the {design} design; the diagnosis's "
-            f"model runs the {ours} design, whose "
-            "response differs from it by 0.2-4%, a gap the candidates then fit: to diagnose "
+            f"model runs the {ours} design, whose response differs from it by 0.2-4%, a gap "
+            "the candidates then fit: to diagnose "
             f"the model against its own data, give --design {design}")
 
 

@@ -273,13 +273,11 @@ def _diagnose_subprocess(data: Path, out: Path, spec: BlindSpec, log: Path,
 
 
 def _design_of(params: dict | None) -> str:
-    """The model design of a run's stored parameters (None: the packaged
-    defaults, the paper's design)."""
-    if params is None:
-        from ...params import load_params
+    """The model design of a run's stored parameters (over the packaged
+    defaults, as `BlindSpec.model_params` reads them; None: the defaults)."""
+    from ...params import params_from_dict
 
-        return load_params().simulation.design
-    return (params.get("simulation") or {}).get("design", "reference")
+    return params_from_dict(params or {}).simulation.design
 
 
 def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
