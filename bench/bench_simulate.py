@@ -20,8 +20,8 @@ vibrating: replaying the generalized forces that the closed loop applied
 during 5 s of the same excitation (zero-order hold, a C++ source), where
 SAP needs more iterations per step than at rest.  No controller or output
 code can make `simulate` faster than the vibrating ceiling at this step.
-It names the memory allocator when one is preloaded (``LD_PRELOAD``;
-docs/history/2026-12-06-spine5-anchor-and-memory-allocation.md).
+It names the libraries preloaded (``LD_PRELOAD``: a faster memory allocator,
+docs/guide.md "Simulation").
 """
 
 from __future__ import annotations
@@ -252,9 +252,9 @@ def main() -> None:
     result = vibrate(params, settled, signal)
     print(f"{s.design} design, time step {s.time_step_s * 1e3:g} ms, outputs at "
           f"{s.output_rate_hz:g} Hz")
-    preloaded = os.environ.get("LD_PRELOAD", "").split()
-    print("memory allocator: " + (", ".join(os.path.basename(p) for p in preloaded) + " (preloaded)"
-                                  if preloaded else "the system's (nothing preloaded)"))
+    preloaded = os.environ.get("LD_PRELOAD", "").replace(":", " ").split()
+    print("preloaded (LD_PRELOAD): " + ", ".join(os.path.basename(p) for p in preloaded)
+          if preloaded else "memory allocator: the system's (nothing preloaded)")
     print(f"settle (equilibrium + {s.settle_time_s:g} s): {t_settle:.1f} s wall")
     print(f"vibrate {args.duration:g} s of 3D excitation: {result.meta['wall_s']:.1f} s wall, "
           f"real-time factor {result.meta['real_time_factor']:.2f}")
