@@ -36,6 +36,7 @@ from pydrake.systems.framework import DiagramBuilder, EventStatus
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
+from ehm_drake.cli_common import preloaded_libraries
 from ehm_drake.diagram import build_diagram, on_design
 from ehm_drake.model.plant import add_seated_human
 from ehm_drake.params import ParameterError, command_design, load_params
@@ -252,9 +253,9 @@ def main() -> None:
     result = vibrate(params, settled, signal)
     print(f"{s.design} design, time step {s.time_step_s * 1e3:g} ms, outputs at "
           f"{s.output_rate_hz:g} Hz")
-    preloaded = os.environ.get("LD_PRELOAD", "").replace(":", " ").split()
-    print("preloaded (LD_PRELOAD): " + ", ".join(os.path.basename(p) for p in preloaded)
-          if preloaded else "memory allocator: the system's (nothing preloaded)")
+    preloaded = preloaded_libraries()
+    print(f"preloaded (LD_PRELOAD): {', '.join(preloaded)}" if preloaded
+          else "memory allocator: the system's (nothing preloaded)")
     print(f"settle (equilibrium + {s.settle_time_s:g} s): {t_settle:.1f} s wall")
     print(f"vibrate {args.duration:g} s of 3D excitation: {result.meta['wall_s']:.1f} s wall, "
           f"real-time factor {result.meta['real_time_factor']:.2f}")

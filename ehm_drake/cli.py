@@ -34,6 +34,7 @@ from .cli_common import (
     add_design_arguments,
     int_at_least,
     positive_float,
+    preloaded_libraries,
     prepare_output_dir,
 )
 from .gap.commands import add_gap_arguments
@@ -185,6 +186,8 @@ def _print_wall(wall: dict, result, time_step: float) -> None:
         print(f"vibration run: {1e6 * wall['vibrate'] / steps:.0f} us per time step "
               f"({steps} steps of {1e3 * time_step:g} ms), real-time factor "
               f"{result.meta['real_time_factor']:.2f}")
+    if preloaded := preloaded_libraries():
+        print(f"preloaded (LD_PRELOAD): {', '.join(preloaded)}")
 
 
 def _simulate_summary(args, params, measures, signal, settled, result, model) -> dict:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from pathlib import Path
 
 
@@ -79,6 +80,15 @@ def add_design_arguments(p: argparse.ArgumentParser) -> None:
                    help="simulation time step in seconds (default: the design's own: "
                    "implicit the largest of 0.005 / n that keeps the model second-order "
                    "accurate, reference 0.001; the parameters' step on their own design)")
+
+
+def preloaded_libraries(environ=None) -> list[str]:
+    """The file names of the libraries preloaded into this process
+    (``LD_PRELOAD``, space or colon separated), e.g. a faster memory
+    allocator (the user guide, "Simulation"); `--verbose` and the bench
+    print them beside the run's speed."""
+    environ = os.environ if environ is None else environ
+    return [os.path.basename(p) for p in environ.get("LD_PRELOAD", "").replace(":", " ").split()]
 
 
 def prepare_output_dir(path: str | Path, force: bool) -> Path:

@@ -58,13 +58,17 @@ def test_restart_from_settled_state(sim_dir, tmp_path, capsys):
     assert "reference design at a 1 ms step" in err and "--design reference" in err
 
 
-def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tmp_path, capsys):
+def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tmp_path, capsys,
+                                                                    monkeypatch):
     """--no-figures leaves out the PNGs only: the data files are the same
     bytes; --verbose prints the command's wall-clock split, whose parts
-    sum to at most the total, and the cost per time step."""
+    sum to at most the total, the cost per time step and the preloaded
+    libraries (a faster allocator, which a user checks took effect)."""
     runs = {}
     for name, extra in (("with", []), ("without", ["--no-figures", "--verbose"])):
         out = runs[name] = tmp_path / name
+        if extra:  # (only the name is read: nothing is started with it)
+            monkeypatch.setenv("LD_PRELOAD", "/usr/lib/x86_64-linux-gnu/libjemalloc.so.2:libx.so")
         assert main(["simulate", "--design", "reference", "--duration", "3", "--settled",
                      str(sim_dir / "settled_state.npz"), "--out", str(out), "--quiet",
                      *extra]) == 0
@@ -83,6 +87,7 @@ def test_no_figures_writes_the_same_data_and_verbose_splits_the_time(sim_dir, tm
     printed = capsys.readouterr().out
     assert "wall clock (s): settle" in printed
     assert "us per time step (3000 steps of 1 ms)" in printed
+    assert "preloaded (LD_PRELOAD): libjemalloc.so.2, libx.so" in printed
 
 
 def test_comfort_and_transmissibility_commands(sim_dir, tmp_path):
