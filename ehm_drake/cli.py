@@ -576,7 +576,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the data only, no PNG figures (they take about 4 s)")
     p.add_argument("--verbose", action="store_true",
                    help="print where the command's time went (settle, vibrate, writing, "
-                   "analysis, figures) and the run's cost per time step")
+                   "analysis, figures), the run's cost per time step and the libraries "
+                   "preloaded (LD_PRELOAD, e.g. a faster memory allocator)")
     add_viz_arguments(p)
     p.set_defaults(func=cmd_simulate)
 
