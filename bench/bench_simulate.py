@@ -10,9 +10,10 @@ at 5 ms unless ``--design reference``, the paper's 1 ms design).
 Prints the settle time (static equilibrium + 5 s settling), the real-time
 factor of the vibration run (simulated seconds per wall second), where a
 step's time goes (`step_split`: a second run, up to 20 s, with the Python
-parts timed: force laws, softening, the logged seat forces, the divergence
-guard, the plant's contact solve where the logging triggers it, the rest)
-and two
+parts timed: force laws, softening, the seat forces (derived after the run
+from the logged generalized contact forces on the model's own seat; else
+logged from the contact results, with the plant's contact solve that this
+triggers), the divergence guard, the rest) and two
 ceilings set by the plant's own discrete step (SAP contact solve, no Python
 systems, no logging): the plant sitting in its settled state with the
 controllers' torques frozen at their settled values, and the plant
@@ -55,6 +56,8 @@ PARTS = {
                    "_calc_seat_forces",
                    "_calc_deformation", "_calc_rms", "_calc_loss", "_update")),
     "seat forces (logged)": ("ehm_drake.systems.outputs", "SeatForces", ("_calc",)),
+    "seat forces (derived from the log)": ("ehm_drake.diagram", "_DerivedSeatForces",
+                                           ("__init__",)),
     "divergence guard": ("ehm_drake.systems.outputs", "DivergenceGuard", ("_check",)),
 }
 

@@ -71,6 +71,7 @@ from .params import (
     with_design,
 )
 from .signals import SeatSignal
+from .systems.contact_forces import ContactDecomposition
 from .systems.excitation import add_seat_excitation
 from .systems.forces import ForceLaws
 from .systems.his import HeadInSpace
@@ -130,6 +131,38 @@ class _DerivedRows:
 
     def sample_times(self) -> np.ndarray:
         return self._state.sample_times()
+
+    def data(self) -> np.ndarray:
+        return self._data
+
+
+class DerivedSeatForcesLog:
+    """The ``seat_forces`` log, derived after the run: the restraints' and
+    tissue's part as logged, plus the contacts' from the logged human's
+    generalized contact forces and plant positions
+    (`ehm_drake.systems.contact_forces`; `SeatForces`' numbers to
+    rounding, without walking the contact results every step).
+    `FindLog(root_context)` as `LoggedOutput`'s."""
+
+    def __init__(self, decomposition: ContactDecomposition, state: LoggedOutput,
+                 tau_contact: LoggedOutput, restraints: LoggedOutput, nq: int):
+        self.decomposition, self.state, self.nq = decomposition, state, nq
+        self.tau_contact, self.restraints = tau_contact, restraints
+
+    def FindLog(self, root_context):  # noqa: N802  (Drake's name)
+        return _DerivedSeatForces(self, root_context)
+
+
+class _DerivedSeatForces:
+    def __init__(self, derived: DerivedSeatForcesLog, root_context):
+        self._restraints = derived.restraints.FindLog(root_context)
+        q = derived.state.FindLog(root_context).data()[:derived.nq]
+        tau = derived.tau_contact.FindLog(root_context).data()
+        self._data = self._restraints.data() + derived.decomposition.contact_forces(
+            q.T, tau.T).T
+
+    def sample_times(self) -> np.ndarray:
+        return self._restraints.sample_times()
 
     def data(self) -> np.ndarray:
         return self._data
@@ -210,8 +243,10 @@ def build_diagram(
     variant : "default", "no-integrator" or "high-stiffness".
     log_period : if given, one VectorLogSink records the seat motion, seat
         forces, torques and plant state at this period (s);
-        `EhmDiagram.loggers` gives each output's rows (`LoggedOutput`), and
-        the channels derived from the logged state (`DerivedChannelsLog`).
+        `EhmDiagram.loggers` gives each output's rows (`LoggedOutput`), the
+        channels derived from the logged state (`DerivedChannelsLog`) and,
+        on the model's own seat, the seat forces derived from the logged
+        generalized contact forces (`DerivedSeatForcesLog`).
     guard : add the `DivergenceGuard` (blow-up detection).
     seat_forces : add the `SeatForces` measurement (contact results: a
         second contact solve per evaluation; linearizations that only need
@@ -322,6 +357,7 @@ def build_diagram(
             restraint_forces = total.get_output_port()
         builder.Connect(restraint_forces, forces.GetInputPort("restraint_forces"))
         sys["seat_forces"] = forces
+        law_ports["seat_restraint_forces"] = restraint_forces
     if guard:
         g = builder.AddNamedSystem("divergence_guard", DivergenceGuard(
             hp, level_ms2=0.0 if signal is None else signal.level()))
@@ -350,12 +386,21 @@ def build_diagram(
         # publish event per period, about 20 us each at a 5 ms step.  The
         # channels are not logged: they are derived from the logged state
         # and seat displacement after the run (`DerivedChannelsLog`).
-        names = [n for n in ("seat_forces", "joint_torques", "his_torque",
-                             "seat_acceleration", "seat_displacement", "state") if n in outputs]
-        sizes = [outputs[n].size() for n in names]
+        # The seat forces, where `ContactDecomposition` holds, are derived
+        # from two vectors Drake computes in C++ (`DerivedSeatForcesLog`).
+        decomposition = ContactDecomposition.of(hp) if seat_forces else None
+        logged = dict(outputs)
+        if decomposition is not None:
+            del logged["seat_forces"]
+            logged["tau_contact"] = plant.get_generalized_contact_forces_output_port(hp.human)
+            logged["seat_restraint_forces"] = law_ports["seat_restraint_forces"]
+        names = [n for n in ("seat_forces", "seat_restraint_forces", "tau_contact",
+                             "joint_torques", "his_torque", "seat_acceleration",
+                             "seat_displacement", "state") if n in logged]
+        sizes = [logged[n].size() for n in names]
         mux = builder.AddNamedSystem("logged_outputs", Multiplexer(sizes))
         for i, name in enumerate(names):
-            builder.Connect(outputs[name], mux.get_input_port(i))
+            builder.Connect(logged[name], mux.get_input_port(i))
         sink = builder.AddNamedSystem("log", VectorLogSink(sum(sizes), log_period))
         builder.Connect(mux.get_output_port(), sink.get_input_port())
         offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
@@ -363,6 +408,10 @@ def build_diagram(
                    for i, name in enumerate(names)}
         loggers["channels"] = DerivedChannelsLog(channels, loggers["state"],
                                                  loggers["seat_displacement"])
+        if decomposition is not None:
+            loggers["seat_forces"] = DerivedSeatForcesLog(
+                decomposition, loggers["state"], loggers.pop("tau_contact"),
+                loggers.pop("seat_restraint_forces"), plant.num_positions())
     diagram = builder.Build()
     diagram.set_name("ehm_seated_human")
     return EhmDiagram(diagram, hp, params, variant, measures, sys, loggers, signal, effects)
