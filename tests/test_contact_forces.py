@@ -83,3 +83,17 @@ def test_contacts_acting_alike_get_least_squares_forces(params, monkeypatch):
     for i in (0, 1):
         expected[d.part[i]] += 1.0 * d.normal[i]
     assert np.allclose(F, expected.reshape(-1), atol=1e-12)
+
+
+def test_long_runs_are_derived_in_bounded_passes_with_the_same_numbers(params):
+    d = build_diagram(params, log_period=0.005).loggers["seat_forces"].decomposition
+    plant = build_diagram(params).plant
+    rng = np.random.default_rng(2)
+    Q = plant.GetPositions(plant.CreateDefaultContext()) + 0.01 * rng.normal(
+        size=(40, plant.num_positions()))
+    tau = rng.normal(size=(40, d.tree.nv))
+    whole = d.contact_forces(Q, tau)
+    d.CHUNK = 7
+    assert np.array_equal(d.contact_forces(Q, tau), whole)
+    with pytest.raises(ValueError, match=r"positions \(5, \d+\) and generalized contact"):
+        d.contact_forces(Q[:5], tau[:4])

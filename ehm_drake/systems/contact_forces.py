@@ -164,14 +164,28 @@ class ContactDecomposition:
             self.normal[i] = X_WG.rotation().matrix()[:, 2]
             self.offset[i] = float(self.normal[i] @ X_WG.translation())
 
+    #: Samples per compiled pass: the columns of a pass take CHUNK x 7 x nv
+    #: doubles (about 28 MB), whatever the run's length.
+    CHUNK = 16384
+
     def contact_forces(self, positions: np.ndarray, tau_contact: np.ndarray) -> np.ndarray:
         """The force each seat part's contacts exert on the body (N; samples
         x [pan, floor, lower_pad, upper_pad] x [x, y, z] flattened, as
         `SeatForces` without the restraints), from the plant's positions
         (samples x nq) and the human's generalized contact forces (samples
         x nv) logged at the same samples."""
-        t = self.tree
         Q = np.ascontiguousarray(positions, float)
+        tau = np.asarray(tau_contact, float)
+        if Q.ndim != 2 or tau.ndim != 2 or len(Q) != len(tau) or tau.shape[1] != self.tree.nv:
+            raise ValueError(f"positions {Q.shape} and generalized contact forces {tau.shape}: "
+                             f"expected (samples, nq) and (samples, {self.tree.nv})")
+        out = np.zeros((len(Q), 3 * len(SEAT_PART_NAMES)))
+        for a in range(0, len(Q), self.CHUNK):
+            out[a:a + self.CHUNK] = self._chunk(Q[a:a + self.CHUNK], tau[a:a + self.CHUNK])
+        return out
+
+    def _chunk(self, Q, tau):
+        t = self.tree
         cols, depth = _compiled_columns(
             Q, t.jtype, t.parent, t.child, t.R_PF, t.p_PF, t.R_MC, t.p_MC, t.axis, t.q0, t.v0,
             t.nb, t.nv, t.on_path, self.body, self.R_BE, self.p_BE, self.radii, self.normal,
@@ -180,13 +194,11 @@ class ContactDecomposition:
         M = cols @ cols.transpose(0, 2, 1)
         idx = np.arange(len(self.body))
         M[:, idx, idx] += apart
-        rhs = cols @ np.asarray(tau_contact, float)[:, :, None]
         try:
-            lam = np.linalg.solve(M, rhs)[:, :, 0]
+            lam = np.linalg.solve(M, cols @ tau[:, :, None])[:, :, 0]
         except np.linalg.LinAlgError:  # two contacts acting alike: least squares per sample
             lam = np.stack([np.linalg.lstsq(a.T, f, rcond=None)[0]
-                            for a, f in zip(cols, tau_contact, strict=True)]) \
-                if len(cols) else np.zeros((0, len(self.body)))
+                            for a, f in zip(cols, tau, strict=True)])
         out = np.zeros((len(Q), len(SEAT_PART_NAMES), 3))
         for i, part in enumerate(self.part):
             out[:, part] += lam[:, i, None] * self.normal[i]
