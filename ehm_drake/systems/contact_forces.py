@@ -14,10 +14,10 @@ contact point: on the segment from the ellipsoid's centre to its deepest
 point, at the penetration's mid-depth (`_contact_columns_kernel`); any
 point on the normal through it gives the same generalized force.  With
 that point the forces are the contact results' to rounding (within 1e-13
-of the largest force; tests/test_contact_forces.py), computed after the run from
-the logged state in one compiled pass (`ContactDecomposition.of` says when
-this holds; elsewhere the diagram logs `SeatForces`).
-"""
+of the largest force; tests/test_contact_forces.py), computed after the run
+from the logged state in compiled passes of bounded memory
+(`ContactDecomposition.of` says when this holds; elsewhere the diagram logs
+`SeatForces`)."""
 
 from __future__ import annotations
 
