@@ -26,7 +26,7 @@ from pydrake.geometry import Ellipsoid, HalfSpace
 from pydrake.multibody.plant import CalcContactFrictionFromSurfaceProperties, ContactModel
 
 from .. import jit
-from .compiled_kinematics import TreeKinematics, poses_kernel
+from .compiled_kinematics import TreeKinematics, _add_column, poses_kernel
 from .seat import SEAT_PART_NAMES, restraint_points
 
 
@@ -44,6 +44,7 @@ def _contact_columns_kernel(Q, jtype, parent, child, R_PF, p_PF, R_MC, p_MC, axi
     probe = np.zeros((3, 0))
     probe_body = np.zeros(0, np.int64)
     nE, sv, p, pw = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    J = np.zeros((3, nv))
     for s in range(n):
         R_WB, p_WB, w, o, t, _ = poses_kernel(Q[s], jtype, parent, child, R_PF, p_PF, R_MC,
                                               p_MC, axis, q0, v0, nb, nv, probe, probe_body)
@@ -85,12 +86,14 @@ def _contact_columns_kernel(Q, jtype, parent, child, R_PF, p_PF, R_MC, p_MC, axi
                 p[j] = p_WB[b, j]
                 for r in range(3):
                     p[j] += R_WB[b, j, r] * pw[r]
+            # The point's Jacobian (`_add_column`, as `jacobians_kernel`),
+            # then along the normal.
             for m in range(nv):
                 if on_path[b, m]:
-                    r0, r1, r2 = p[0] - o[m, 0], p[1] - o[m, 1], p[2] - o[m, 2]
-                    cols[s, i, m] = (normal[i, 0] * (w[m, 1] * r2 - w[m, 2] * r1 + t[m, 0])
-                                     + normal[i, 1] * (w[m, 2] * r0 - w[m, 0] * r2 + t[m, 1])
-                                     + normal[i, 2] * (w[m, 0] * r1 - w[m, 1] * r0 + t[m, 2]))
+                    J[0, m] = J[1, m] = J[2, m] = 0.0
+                    _add_column(w, o, t, m, p, 1.0, J, 0)
+                    cols[s, i, m] = (normal[i, 0] * J[0, m] + normal[i, 1] * J[1, m]
+                                     + normal[i, 2] * J[2, m])
     return cols, depth
 
 
