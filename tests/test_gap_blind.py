@@ -183,24 +183,23 @@ def test_a_gap_outside_every_candidate_is_unexplained_and_localized(blind_run, t
     assert all((c["segment"], c["dof"]) == ("head", "z") for c in sig)
 
 
-def test_a_run_of_the_other_design_is_refused_with_the_option_that_resumes_it(tmp_path):
+def test_a_run_of_the_other_design_is_refused_with_the_option_that_resumes_it(tmp_path,
+                                                                              implicit):
     """A blind folder made on the paper's design (the defaults before the
     commands moved to the implicit one) is not resumed on the implicit design:
     the error names the setting and the option that resumes it, before any
     trial is made."""
     from dataclasses import asdict
 
-    from ehm_drake.diagram import on_design
     from ehm_drake.gap.lab.blind import BlindError, BlindSpec, run_blind
-    from ehm_drake.params import load_params
 
     old = BlindSpec(**SHORT_BLIND)
     settings = {k: v for k, v in asdict(old).items() if k not in ("workers", "extra")}
     (tmp_path / "blind_settings.json").write_text(json.dumps(settings))
-    implicit = on_design(load_params(), "implicit").to_dict()
     with pytest.raises(BlindError, match=r"other settings \(params\) \(it ran the reference "
                        r"design: --design reference\)"):
-        run_blind(BlindSpec(**SHORT_BLIND, params=implicit), tmp_path, progress=False)
+        run_blind(BlindSpec(**SHORT_BLIND, params=implicit.to_dict()), tmp_path,
+                  progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blind_settings.json"]
 
 
