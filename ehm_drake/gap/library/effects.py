@@ -55,7 +55,8 @@ Ranges (strength 1) and reasons:
   damper to the seat frame, stiffness from 5e6 N/m (rigid) down to 4e4 N/m
   (soft automotive cushion with the occupant's share ~40 kg: 5 Hz), damping
   ratio 0.2.
-* softening: the seated tissue (pan and back contacts) loses, beyond the
+* softening: the seated tissue on the pan (under the ischial tuberosities
+  and the thighs; `SOFTENING_PAIRS`) loses, beyond the
   model's own softening (`ehm_drake.model.softening`), up to 50% of its
   contact's long-range stiffness as it moves (half of it at the model's
   critical amplitude, 0.07 mm RMS): the size of the nonlinearity varies
@@ -160,6 +161,14 @@ SEAT_SURFACES = ("pan", "lower_pad", "upper_pad")
 BACK_PADS = ("lower_pad", "upper_pad")
 #: Joint groups whose active stiffness rises with co-contraction.
 COCONTRACTION_GROUPS = ("lumbar", "thoracic", "neck", "hips")
+#: The contact pairs whose tissue the `softening` candidate softens: those on
+#: the pan.  The back's tissue (the pads) is left out: a back pad losing
+#: stiffness as the trunk sways is what `backrest_separation` describes, and
+#: on the pads the candidate's fore-and-aft signature is mostly theirs (the
+#: trunk's fore-and-aft motion under vertical excitation changes four times
+#: more than with the pan's tissue alone), so the two candidates could not
+#: be told apart.  The body's own softening keeps every tissue pair.
+SOFTENING_PAIRS = ("pelvis_pan", "thighs_pan")
 
 
 # ---------------------------------------------------------------------------
@@ -463,8 +472,8 @@ class SeatCushionDynamics(CandidateEffect):
     "body-on-seat resonances (vertical pelvis, trunk and head; the apparent mass) move DOWN "
     "with level beyond the model's own softening; no extra mode"))
 class Softening(CandidateEffect):
-    """A second `BodySoftening` system (named "softening") on the tissue's
-    contact points: each loses up to `extra_loss` of its contact's
+    """A second `BodySoftening` system (named "softening") on the pan
+    tissue's contact points (`SOFTENING_PAIRS`): each loses up to `extra_loss` of its contact's
     long-range stiffness as it moves, with the model's critical amplitude
     and memory (`ehm_drake.model.softening`); a subject whose nonlinearity
     is larger than the model's (its size varies between people and with
@@ -472,13 +481,13 @@ class Softening(CandidateEffect):
 
     def add_force_systems(self, parts) -> list:
         from ...model.restraints import restraint_points
-        from ...model.softening import TISSUE_PAIRS, ElementSet
+        from ...model.softening import ElementSet
         from ...systems.softening import BodySoftening
 
         r = self.values["extra_loss"]
         if not r > 0:
             return []
-        pts = [p for p in restraint_points(parts.hp) if p.pair in TISSUE_PAIRS]
+        pts = [p for p in restraint_points(parts.hp) if p.pair in SOFTENING_PAIRS]
         t = parts.params.softening.tissue
         k = np.array([getattr(parts.params.contact, p.pair).stiffness for p in pts])
         n = len(pts)

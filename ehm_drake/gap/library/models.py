@@ -53,7 +53,7 @@ from scipy.stats import norm
 from ...model.softening import TISSUE_PAIRS, equivalent_loss, loss_fraction, tissue_element_set
 from ...params import params_from_dict
 from ..single.localize import Rows
-from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, EffectParam
+from .effects import BACK_PADS, EFFECTS, SEAT_SURFACES, SOFTENING_PAIRS, EffectParam
 from .family import (
     GROUP_NAMES,
     RESTRAINT_GROUPS,
@@ -287,10 +287,11 @@ EQUIVALENT_TOL = 1e-3
 #: change, at most this many times per statistics update.
 SOFTENING_TOLERANCE = 2e-3
 SOFTENING_ITERATIONS = 25
-#: Restraint groups whose tissue softens (the model's `TISSUE_PAIRS`, whose
-#: points the time-domain `softening` candidate also takes), and the contact
-#: pair of each group.
+#: Restraint groups whose tissue softens (the model's `TISSUE_PAIRS`), those
+#: the `softening` candidate softens further (its `SOFTENING_PAIRS`, as in the
+#: time domain), and the contact pair of each group.
 TISSUE_GROUPS = tuple(RESTRAINT_GROUPS[p] for p in TISSUE_PAIRS)
+SOFTENING_GROUPS = tuple(RESTRAINT_GROUPS[p] for p in SOFTENING_PAIRS)
 RESTRAINT_PAIRS = {g: p for p, g in RESTRAINT_GROUPS.items()}
 #: Slip relaxation rates below this (1/s) are taken as zero: slower than the
 #: lowest analysed frequency by two decades.
@@ -431,7 +432,7 @@ class Predictor:
             if "softening" in values:
                 # The candidate's extra loss, in units of the contact's own
                 # (long-range) stiffness.
-                tissue = np.isin(self._group_of, TISSUE_GROUPS)
+                tissue = np.isin(self._group_of, SOFTENING_GROUPS)
                 rel[tissue] -= loss_fraction(s_n[tissue], self._critical,
                                              values["softening"]["extra_loss"])
             for g in TISSUE_GROUPS:
