@@ -576,3 +576,71 @@ def test_level_rule_names_softening_beyond_the_models_own():
         assert not apply_softening_rule(r, names)
         assert (r["verdict"], r["best_effect"]) == (verdict, best)
         assert r["level_rule"]["named"]
+
+
+# ---------------------------------------------------------------------------
+# The softening candidate acts on the pan's tissue
+# ---------------------------------------------------------------------------
+
+
+def test_the_softening_candidate_softens_the_pan_tissue_and_leaves_the_back_pads():
+    """In the linear family the candidate's extra loss lowers the normal
+    stiffness of the pelvis and thigh points on the pan by the loss at
+    their movement, r x / (1 + x) with x the movement over the critical
+    amplitude, and leaves the back pads' (where a separating back acts)
+    and the feet's as they are."""
+    from types import SimpleNamespace
+
+    from ehm_drake.gap.library.family import EQUIVALENT_DIRECTIONS, GROUP_NAMES
+    from ehm_drake.gap.library.models import Predictor
+    from ehm_drake.model.softening import ElementSet
+
+    n = len(GROUP_NAMES)  # one point per restraint group
+    info = SimpleNamespace(
+        names=[f"{g}_point" for g in GROUP_NAMES], groups=np.array(GROUP_NAMES),
+        parts=np.array(["pan", "pan", "lower_pad", "upper_pad", "floor"]),
+        k_contact=np.full(n, 2e5), force_limit=np.full(n, 1e3), k_shear=np.full(n, 1e4),
+        penetration=np.full(n, 4e-3), deflection=np.zeros((n, 2)))
+    pred = object.__new__(Predictor)
+    critical = 7e-5
+    movement = 1.4e-4  # twice the critical amplitude: the loss is 2/3 of r
+    pred.statics = SimpleNamespace(info=info, separation_slope=np.zeros(n))
+    pred.candidate = SimpleNamespace(values=lambda c: {"softening": {"extra_loss": c[0]}})
+    pred.tests = [SimpleNamespace(level=0.6)]
+    pred.sigmas = [{"normal": np.full(n, movement), "deflection": np.full(2 * n, 1e-6),
+                    "deflection_rate": np.full(2 * n, 1e-5)}]
+    pred._eq_names = list(EQUIVALENT_DIRECTIONS)
+    pred._group_of = info.groups
+    pred._tissue = (np.zeros(n, bool), ElementSet((), (), *[np.zeros(0)] * 5))
+    pred._critical = critical
+    off = pred._equivalent(0, [0.0])
+    on = pred._equivalent(0, [0.45])
+    k = {g: EQUIVALENT_DIRECTIONS.index(f"k_normal:{g}") for g in GROUP_NAMES}
+    for g in ("pelvis", "thighs"):
+        assert on[k[g]] - off[k[g]] == pytest.approx(-0.45 * 2 / 3, rel=1e-12), g
+    for g in ("lower_pad", "upper_pad", "feet"):
+        assert on[k[g]] == off[k[g]], g
+    # Nothing else moves: shear, damping and creep are the candidate's own only
+    # through the normal stiffness.
+    rest = [i for i in range(len(on)) if i not in (k["pelvis"], k["thighs"])]
+    np.testing.assert_array_equal(on[rest], off[rest])
+
+
+def test_the_softening_candidate_adds_elements_at_the_pan_points_only():
+    """In the time domain the candidate's system ("softening") holds one
+    element per restraint point on the pan, the pelvis's and the thighs',
+    with the model's critical amplitude, and none at the back pads or the
+    feet."""
+    from ehm_drake.diagram import build_diagram
+    from ehm_drake.model.restraints import restraint_points
+    from ehm_drake.params import load_params
+
+    p = load_params()
+    model = build_diagram(p, effects={"softening": effect_values("softening", 1.0)})
+    el = model.systems["softening"].elements
+    pan = [q.name for q in restraint_points(model.hp) if q.pair in ("pelvis_pan", "thighs_pan")]
+    assert list(el.names) == pan == ["buttocks", "thigh_l", "thigh_r"]
+    others = {q.name for q in restraint_points(model.hp)} - set(pan)
+    assert others and not others & set(el.names)
+    np.testing.assert_array_equal(el.max_loss, 0.5)
+    np.testing.assert_array_equal(el.critical, p.softening.tissue.critical_rms_m)
