@@ -466,7 +466,7 @@ class SeatCushionDynamics(CandidateEffect):
 
 
 @_candidate(Effect(
-    "softening", "the seated tissue losing more stiffness with movement than the model's",
+    "softening", "the tissue on the pan losing more stiffness with movement than the model's",
     (EffectParam("extra_loss", "-", 0.0, 0.5, bounds=(0.0, 0.9)),),
     "level", True,
     "body-on-seat resonances (vertical pelvis, trunk and head; the apparent mass) move DOWN "
