@@ -620,8 +620,8 @@ def test_the_softening_candidate_softens_the_pan_tissue_and_leaves_the_back_pads
         assert on[k[g]] - off[k[g]] == pytest.approx(-0.45 * 2 / 3, rel=1e-12), g
     for g in ("lower_pad", "upper_pad", "feet"):
         assert on[k[g]] == off[k[g]], g
-    # Nothing else moves: shear, damping and creep are the candidate's own only
-    # through the normal stiffness.
+    # Nothing else moves: the candidate acts through the pan's normal stiffness
+    # alone (no shear, damping or creep direction).
     rest = [i for i in range(len(on)) if i not in (k["pelvis"], k["thighs"])]
     np.testing.assert_array_equal(on[rest], off[rest])
 
