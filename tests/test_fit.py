@@ -133,9 +133,10 @@ def test_bad_data_is_refused(params):
         fit(data, params, "neck_damping", holdout="direction=y", workers=1, progress=False)
 
 
-def test_the_fit_leaves_out_the_first_bin_of_a_welch_grid():
-    """The first bin's window reaches 0 Hz (`FrfData.first_welch_bin`): whatever it holds
-    leaves the residuals unchanged; the second bin counts."""
+def test_the_fit_leaves_out_the_first_two_bins_of_a_welch_grid():
+    """The first two bins' windows reach below the excited band
+    (`FrfData.lowest_welch_bins`): whatever they hold leaves the residuals unchanged; the
+    third bin counts."""
     f = np.arange(1, 121) * 0.1  # 10 s segments
     n = len(f)
 
@@ -145,10 +146,11 @@ def test_the_fit_leaves_out_the_first_bin_of_a_welch_grid():
 
     gain = 0.1 + f
     base = Residuals.build(table(gain), {})
-    assert base.freqs[0] == pytest.approx(0.2) and len(base.row_f) == n - 1
+    assert base.freqs[0] == pytest.approx(0.3) and len(base.row_f) == n - 2
     T = np.ones((len(base.freqs), max(base.row_c) + 1, 1), complex)
     for factor, same in ((np.r_[3.0, np.ones(n - 1)], True),
-                         (np.r_[1.0, 3.0, np.ones(n - 2)], False)):
+                         (np.r_[1.0, 3.0, np.ones(n - 2)], True),
+                         (np.r_[1.0, 1.0, 3.0, np.ones(n - 3)], False)):
         r = Residuals.build(table(gain * factor), {})
         assert np.array_equal(r(T), base(T)) == same
 

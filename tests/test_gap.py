@@ -148,9 +148,10 @@ def test_the_bands_are_the_issue_bands():
 # ---------------------------------------------------------------------------
 
 
-def test_the_first_bin_of_a_welch_grid_is_not_analysed():
-    """Its Hann main lobe reaches 0 Hz (tests/test_spectral.py measures the bias): the
-    diagnosis drops it, per channel and level, and keeps a table that starts higher."""
+def test_the_first_two_bins_of_a_welch_grid_are_not_analysed():
+    """Their Hann main lobes reach below the excited band (tests/test_spectral.py measures
+    the bias): the diagnosis drops them, per channel and level, and keeps a table that
+    starts higher."""
     from ehm_drake.analysis.formats import FrfData
     from ehm_drake.gap.single.localize import rows_from_frf
 
@@ -164,11 +165,11 @@ def test_the_first_bin_of_a_welch_grid_is_not_analysed():
     welch = np.arange(1, 121) * 0.1  # 10 s segments: 0.1 ... 12 Hz
     trimmed = np.arange(5, 121) * 0.1  # a lab's table from 0.5 Hz
     frf = FrfData.concat([table(welch, 0.3), table(trimmed, 0.6), table(welch / 2, 1.0)])
-    first = frf.first_welch_bin()
-    assert first.sum() == 2
-    assert sorted(frf.freq_hz[first]) == pytest.approx([0.05, 0.1])
+    lowest_bins = frf.lowest_welch_bins()
+    assert lowest_bins.sum() == 4
+    assert sorted(frf.freq_hz[lowest_bins]) == pytest.approx([0.05, 0.1, 0.1, 0.2])
     rows = rows_from_frf(frf)
-    for level, lowest in ((0.3, 0.2), (0.6, 0.5), (1.0, 0.1)):
+    for level, lowest in ((0.3, 0.3), (0.6, 0.5), (1.0, 0.15)):
         assert rows.freq[rows.level == level].min() == pytest.approx(lowest)
 
 

@@ -144,13 +144,13 @@ class Residuals:
         """`groups`: the excitation groups (`excitation_groups`) the rows are
         assigned to; `shares`: each path's share of its output
         (`path_shares`, simultaneous axes), which scales its weight."""
-        # The first bin of each Welch grid is not an estimate of T(f) (its window
-        # reaches 0 Hz: `FrfData.first_welch_bin`); the fit leaves it out as the gap
-        # diagnosis does.
-        keep = (frf.coherence >= min_coherence) & ~frf.first_welch_bin()
+        # The first two bins of each Welch grid are not estimates of T(f) (their
+        # windows reach below the excited band: `FrfData.lowest_welch_bins`); the fit
+        # leaves them out as the gap diagnosis does.
+        keep = (frf.coherence >= min_coherence) & ~frf.lowest_welch_bins()
         if not np.any(keep):
-            raise FitError(f"no data row has coherence >= {min_coherence} (the first bin of "
-                           "each Welch grid left out); nothing to fit")
+            raise FitError(f"no data row has coherence >= {min_coherence} (the first two bins "
+                           "of each Welch grid left out); nothing to fit")
         direction = frf.direction[keep]
         segment = frf.segment[keep]
         dof = frf.dof[keep]

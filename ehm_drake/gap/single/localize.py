@@ -149,8 +149,8 @@ PLANE_CHANNELS = {
 def rows_from_frf(frf: FrfData, floor: float = MODEL_FLOOR,
                   default_n_averages: int = DEFAULT_N_AVERAGES,
                   channels: str = "plane") -> Rows:
-    """The analysed rows of `frf`: inside the bands, not the first bin of a
-    Welch grid (`FrfData.first_welch_bin`) and, with channels = "plane" (default), in
+    """The analysed rows of `frf`: inside the bands, not the first two bins of a
+    Welch grid (`FrfData.lowest_welch_bins`) and, with channels = "plane" (default), in
     the excitation's plane of motion (`PLANE_CHANNELS`; "all" keeps every
     channel)."""
     if channels not in ("plane", "all"):
@@ -159,7 +159,7 @@ def rows_from_frf(frf: FrfData, floor: float = MODEL_FLOOR,
     H = frf.gain * np.exp(1j * np.radians(frf.phase_deg))
     n = np.where(np.isfinite(frf.n_averages), frf.n_averages, float(default_n_averages))
     names = np.char.add(np.char.add(frf.segment.astype(str), "_"), frf.dof.astype(str))
-    keep = (b >= 0) & ~frf.first_welch_bin()
+    keep = (b >= 0) & ~frf.lowest_welch_bins()
     if channels == "plane":
         keep &= np.array([nm in PLANE_CHANNELS[d] for nm, d in zip(names, frf.direction,
                                                                    strict=True)])
