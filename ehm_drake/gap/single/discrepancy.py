@@ -132,12 +132,15 @@ def estimate_scale(rows, Hm) -> float:
     """Std of the discrepancy coefficients implied by the residual of the
     model's Hm: per group, the unpenalized least-squares coefficients, whose
     mean square minus their noise variance (diag (A^H A)^-1 per real
-    component, the residuals being normalized) is the prior variance."""
+    component, the residuals being normalized) is the prior variance.  Only
+    the knots with rows under their hat count (none lie under the lowest one
+    when the data start above 0.26 Hz: the lowest Welch bins are left out)."""
     s = row_sigma(rows.rel_var, rows.H, Hm)
     disc = Discrepancy.for_rows(rows, 1.0)
     signal, noise, n = 0.0, 0.0, 0
     for g in disc.groups:
-        A = (Hm[g] / s[g])[:, None] * disc.B[g]
+        used = np.flatnonzero(disc.B[g].max(axis=0) > 0.0)
+        A = (Hm[g] / s[g])[:, None] * disc.B[g][:, used]
         AhA = A.conj().T @ A
         if np.linalg.cond(AhA) > 1e12:
             continue
@@ -145,7 +148,7 @@ def estimate_scale(rows, Hm) -> float:
         c = np.linalg.solve(AhA, A.conj().T @ r0)
         signal += float(np.sum(np.abs(c) ** 2)) / 2.0
         noise += float(np.real(np.trace(np.linalg.inv(AhA))))
-        n += KNOTS
+        n += len(used)
     if n == 0:
         return SCALE_BOUNDS[0]
     var = max((signal - noise) / n, 0.0)
