@@ -266,7 +266,7 @@ class FrfData:
         weighted towards higher frequencies, biased wherever T rises steeply.  Where the gain
         rises as f^2 (every rotation under a translation at low frequency) the first bin is
         about twice the truth and the second about 12% above it on average, the bins above
-        within 2% (mean ln ratio over 8 noise-free 120 s records of a flat 0.1-12 Hz
+        within 2.5% (mean ln ratio over 8 noise-free 120 s records of a flat 0.1-12 Hz
         excitation, 10 s segments: tests/test_spectral.py).  On 30 s records the second
         bin's bias hides in its coherence-based error; on 120 s records of the trunk's
         fore-and-aft motion under vertical vibration it reached 1.1-1.45 times the subject's
