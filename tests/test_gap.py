@@ -307,6 +307,27 @@ def test_every_effect_acts_the_same_on_the_implicit_design(settled_effects):
     assert {"reflex_delay", "seat_cushion_dynamics", "arms"} <= set(judged)
 
 
+def test_the_reflex_delay_fit_stops_where_the_loop_is_still_stable():
+    """The closed loop linearized with its delay buffer (implicit design,
+    5 ms): stable at the largest delay the diagnosis may fit, unstable at
+    40 ms (the bound before: a fit there described a loop that cannot be
+    measured)."""
+    from ehm_drake.analysis.linear import linearize
+    from ehm_drake.diagram import build_diagram, on_design
+    from ehm_drake.params import load_params
+
+    p = on_design(load_params(), "implicit")
+    bound = EFFECTS["reflex_delay"].params[0].bounds[1]
+
+    def radius(tau):
+        lm = linearize(build_diagram(p, effects={"reflex_delay": {"tau_s": tau}}), method="fd")
+        k = lm._reduced()
+        return np.abs(np.linalg.eigvals(lm.A[np.ix_(k, k)])).max()
+
+    assert radius(bound) < 1.0
+    assert radius(0.04) > 1.0
+
+
 def test_a_delay_of_n_steps_lags_the_plant_state_by_n_steps():
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder

@@ -19,9 +19,12 @@ Ranges (strength 1) and reasons:
 * reflex_delay: tau = 30 ms transport delay in the PID (P and I) and
   head-in-space feedback (short-latency stretch reflexes 20-40 ms; the
   derivative action stays instantaneous as intrinsic muscle damping, as
-  does the passive tissue).  Beyond ~40 ms this model's neck loop loses
-  stability (linear analysis: a 7 Hz head mode with damping ratio 0.02 at
-  40 ms, unstable at 45 ms), so 30 ms is the largest plausible value here.
+  does the passive tissue).  Beyond ~35 ms this model's neck loop loses
+  stability (the linearized closed loop with its delay buffer: the 7-8 Hz
+  head mode's damping ratio at 35 ms is 0.006 on the implicit design at
+  5 ms and 0.04 on the paper's design; at 40 ms it is unstable on both,
+  -0.031 and -0.005), so 30 ms is the largest plausible value here and the
+  fit stops at 35 ms.
 * seat_foam_stiffening: gamma = 3 /mm^2: the pan and backrest contact
   tangent stiffness k (1 + 3 gamma d^2) rises by 3x at 0.6 mm of dynamic
   compression d about the static preload (polyurethane foam stiffens
@@ -197,7 +200,7 @@ def delay_system(steps: int, h: float, size: int):
 
 @_candidate(Effect(
     "reflex_delay", "neural transport delay in the PID and head-in-space feedback",
-    (EffectParam("tau_s", "s", 0.0, 0.03, bounds=(0.0, 0.04)),),
+    (EffectParam("tau_s", "s", 0.0, 0.03, bounds=(0.0, 0.035)),),
     "delay", False,
     "phase lag growing with frequency; lower, sharper head/trunk peaks; no level "
     "dependence"))
