@@ -203,6 +203,57 @@ def test_a_run_of_the_other_design_is_refused_with_the_option_that_resumes_it(tm
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blind_settings.json"]
 
 
+@pytest.mark.parametrize("c3d", [False, True])
+def test_a_subject_interrupted_while_being_written_is_made_again(tmp_path, monkeypatch, c3d):
+    """A blind run stopped while a subject's records were being written (its
+    frf.csv already there, a time series cut short) resumes by making that
+    subject again: never a finished-looking folder with a cut record in it,
+    which the diagnosis would meet trials later.  A folder left without its
+    key by an earlier version is made again too; a finished one is kept."""
+    from ehm_drake.gap.lab import blind
+
+    calls = []
+
+    def fake_synthesize(spec, out_dir, key_path, params=None, workers=None, progress=True):
+        calls.append(out_dir.name)
+        out_dir.mkdir(parents=True)
+        (out_dir / "frf.csv").write_text("frequency\n")
+        (out_dir / "z_0.3").mkdir()
+        (out_dir / "z_0.3" / "timeseries.csv").write_text("t,a\n0,")
+        if len(calls) == 1:
+            raise KeyboardInterrupt  # stopped mid-record
+        (out_dir / "z_0.3" / "timeseries.csv").write_text("t,a\n0,1\n")
+        if spec.c3d:
+            (out_dir / "c3d").mkdir()
+        key_path.write_text("{}")
+
+    def fake_c3d_lab_folder(paths, marker_map, out, progress=True):
+        out.mkdir()
+        (out / "frf.csv").write_text("frequency\n")
+
+    monkeypatch.setattr(blind, "synthesize", fake_synthesize)
+    import ehm_drake.analysis.lab_c3d as lab_c3d
+
+    monkeypatch.setattr(lab_c3d, "c3d_lab_folder", fake_c3d_lab_folder)
+    spec = SynthSpec({}, 3, (0.3,), "z", 30.0, c3d=c3d)
+    data, key = tmp_path / "subject" / "data", tmp_path / "keys" / "subject.json"
+    key.parent.mkdir()
+    with pytest.raises(KeyboardInterrupt):
+        blind._synthesize_once(spec, data, key, 1)
+    assert not data.exists() and not key.exists()
+    blind._synthesize_once(spec, data, key, 1)
+    assert len(calls) == 2 and key.is_file()
+    assert sorted(p.name for p in (tmp_path / "subject").iterdir()) == \
+        (["data", "data_lab"] if c3d else ["data"])
+    if not c3d:
+        assert (data / "z_0.3" / "timeseries.csv").read_text() == "t,a\n0,1\n"
+    blind._synthesize_once(spec, data, key, 1)
+    assert len(calls) == 2  # finished: kept
+    key.unlink()  # a folder without its key: made again
+    blind._synthesize_once(spec, data, key, 1)
+    assert len(calls) == 3 and key.is_file()
+
+
 def test_trial_fractions_that_cannot_add_up_are_refused_with_the_fix():
     """`--p-none 1` alone meets the default share of two-effect trials: the
     error names both values and the way out (a run of no-effect subjects

@@ -1288,3 +1288,19 @@ def test_the_anchor_fit_keeps_only_steps_that_lower_the_true_cost():
     start = linearize(np.full(2, 3.0))
     with np.errstate(over="ignore"):
         assert linearize(start.x + step(start, None, clip=False)[0]).cost > start.cost
+
+
+def test_a_cut_cache_file_is_computed_again_not_a_crash(tmp_path):
+    """A group's cached anchor or null gains cut short (a run stopped while
+    writing it, before writes were whole-or-nothing) reads as no cache, and
+    a cache written again reads back whole."""
+    from ehm_drake.gap.reference_group.anchor import read_cache_json, write_cache_json
+
+    path = tmp_path / "reference_null" / "k.json"
+    path.parent.mkdir()
+    path.write_text('{"visceral_mass": [0.1, 0.')
+    assert read_cache_json(path) is None
+    assert read_cache_json(tmp_path / "none.json") is None
+    write_cache_json(path, {"visceral_mass": [0.1, 0.2]})
+    assert read_cache_json(path) == {"visceral_mass": [0.1, 0.2]}
+    assert [p.name for p in path.parent.iterdir()] == ["k.json"]

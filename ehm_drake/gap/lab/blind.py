@@ -38,6 +38,7 @@ import numpy as np
 
 from ...progress import Progress
 from ...realities import MODEL_REALITY, RealityError
+from ...sweep.store import atomic_write
 from ..library.effects import EFFECT_NAMES, EFFECTS
 from .scoring import markdown, score, summarize
 from .synth import DEFAULT_DURATION_S, DEFAULT_LEVELS, SynthSpec, synthesize
@@ -329,7 +330,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             if "detectability" not in res:  # scored before the detectability check
                 _judge(res, data, json.loads(key.read_text()),
                        json.loads((diag / "report.json").read_text()), spec, twin, params)
-                rfile.write_text(json.dumps(res, indent=1) + "\n")
+                atomic_write(rfile, json.dumps(res, indent=1) + "\n")
             results.append(res)
             prog.skip()
             calibrated = True  # (by the run that diagnosed it)
@@ -346,7 +347,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             # the scores, not a crash of the whole run.
             res = {"trial": tr["trial"], "hidden": tr["effects"], "skipped": str(e)}
             tdir.mkdir(parents=True, exist_ok=True)
-            rfile.write_text(json.dumps(res, indent=1) + "\n")
+            atomic_write(rfile, json.dumps(res, indent=1) + "\n")
             results.append(res)
             prog.step(f"trial {k + 1}: skipped, the reality diverged ({e})")
             continue
@@ -366,7 +367,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
                           if e["effect"] in tr["effects"]},
                "synth_s": t_synth, "diagnose_s": report.get("timing_s", {}).get("total")}
         _judge(res, data, key_data, report, spec, twin, params)
-        rfile.write_text(json.dumps(res, indent=1) + "\n")
+        atomic_write(rfile, json.dumps(res, indent=1) + "\n")
         results.append(res)
         s = res["score"]
         ok = s["top1"] or (not s["has_effect"] and not s["false_alarm"])
@@ -454,29 +455,39 @@ def _contrast_subjects(spec: BlindSpec, out: Path, progress: bool, params=None) 
 def _synthesize_once(synth: SynthSpec, data: Path, key: Path, workers: int | None,
                      params=None, lab: Path | None = None) -> None:
     """`synthesize` into `data` and `key` unless a finished data folder is
-    there (a half-written one, from an interrupted run, is redone).  With
-    `synth.c3d` the synthetic lab's own folder (its C3D sessions, marker
-    map and direct estimates) is `lab` (default: `data` + ``_lab``), and
-    `data` the lab folder made from its sessions alone: what diagnose is
-    given."""
+    there.  Each folder is made under a temporary name and renamed when
+    whole, and the key is written last, so a run interrupted at any point
+    (even while a record is being written) redoes that subject on resuming;
+    a folder without its key (left by an interrupted run of an earlier
+    version) is redone too.  With `synth.c3d` the synthetic lab's own folder
+    (its C3D sessions, marker map and direct estimates) is `lab` (default:
+    `data` + ``_lab``), and `data` the lab folder made from its sessions
+    alone: what diagnose is given."""
     import shutil
 
-    if (data / "frf.csv").is_file():
+    if (data / "frf.csv").is_file() and key.is_file():
         return
     if not synth.c3d:
         lab = data
     elif lab is None:
         lab = data.with_name(data.name + "_lab")
-    for folder in {data, lab}:
+    partial = {f: f.with_name(f.name + ".partial") for f in (data, lab)}
+    for folder in (*partial, *partial.values()):
         shutil.rmtree(folder, ignore_errors=True)
     key.unlink(missing_ok=True)
-    synthesize(synth, lab, key, params=params, workers=workers, progress=False)
+    key_partial = key.with_name(key.name + ".partial")
+    key_partial.unlink(missing_ok=True)
+    synthesize(synth, partial[lab], key_partial, params=params, workers=workers,
+               progress=False)
     if synth.c3d:
         from ...analysis.lab_c3d import c3d_lab_folder
         from .synth_c3d import C3D_FOLDER, MARKER_MAP_FILENAME
 
-        c3d_lab_folder([lab / C3D_FOLDER], lab / C3D_FOLDER / MARKER_MAP_FILENAME, data,
-                       progress=False)
+        partial[lab].rename(lab)
+        c3d_lab_folder([lab / C3D_FOLDER], lab / C3D_FOLDER / MARKER_MAP_FILENAME,
+                       partial[data], progress=False)
+    partial[data].rename(data)
+    key_partial.rename(key)
 
 
 def _judge(res: dict, data: Path, key: dict, report: dict, spec: BlindSpec,

@@ -47,12 +47,24 @@ ANCHOR_CACHE_VERSION = "3"
 
 
 def write_cache_json(path: Path, obj) -> None:
-    """Cache `obj` at `path` (a cache that cannot be written is skipped)."""
+    """Cache `obj` at `path`, whole or not at all (a run stopped while
+    writing leaves no cut file; a cache that cannot be written is skipped)."""
+    from ...sweep.store import atomic_write
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(obj))
+        atomic_write(path, json.dumps(obj))
     except OSError:
         pass
+
+
+def read_cache_json(path: Path):
+    """The object cached at `path`; None when there is none or it cannot be
+    read (computed again and cached over it)."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
 
 
 class _BoundedPredictor(Predictor):
@@ -145,8 +157,8 @@ def fit_anchor(group, params: ModelParams, measures: BodyMeasures,
                                      measures.stature_m, iterations], sort_keys=True,
                                     default=float).encode()).hexdigest()[:20]
     path = cache_dir() / "anchors" / f"{key}.json"
-    if use_cache and path.is_file():
-        out = json.loads(path.read_text())
+    out = read_cache_json(path) if use_cache else None
+    if out is not None:
         out["params"] = apply_scales(params, free, np.exp(out["log_scales"]))
         return out
     rows = dataclasses.replace(group.rows, rel_var=group.variance / group.size / 2

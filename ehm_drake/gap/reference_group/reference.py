@@ -86,7 +86,7 @@ from ..single.diagnose import (
 )
 from ..single.localize import MODEL_FLOOR, cell_keys, gap_value, localize, mark_after
 from ..single.verdict import AMBIGUITY_MARGIN, family_record, held_back_note
-from .anchor import ANCHOR_ITERATIONS, fit_anchor, write_cache_json
+from .anchor import ANCHOR_ITERATIONS, fit_anchor, read_cache_json, write_cache_json
 from .calibration import (
     DEGENERATE_GAIN,
     FAMILY_ALPHA,
@@ -389,8 +389,9 @@ def null_gains(group: ReferenceGroup, families, slope, base_names, names, worker
     """{candidate: [held-out gain of each reference subject against the
     others]}: the gains of subjects without any effect.  Cached."""
     path = cache_dir() / "reference_null" / f"{_null_key(group, names, anchor_key)}.json"
-    if use_cache and path.is_file():
-        return json.loads(path.read_text())
+    cached = read_cache_json(path) if use_cache else None
+    if cached is not None:
+        return cached
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
              "names": list(names)}
     out = {n: [None] * group.size for n in names}
