@@ -315,7 +315,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
     results = []
     prog = Progress("blind", len(trials), progress, unit="trials")
     calibrated = False  # the group's thresholds computed (by a trial's diagnosis)
-    for k, tr in enumerate(trials):
+    for tr in trials:
         tdir = out / f"trial_{tr['trial']:03d}"
         rfile = tdir / "result.json"
         data, key, diag = tdir / "data", out / "keys" / f"trial_{tr['trial']:03d}.json", \
@@ -349,7 +349,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
             tdir.mkdir(parents=True, exist_ok=True)
             atomic_write(rfile, json.dumps(res, indent=1) + "\n")
             results.append(res)
-            prog.step(f"trial {k + 1}: skipped, the reality diverged ({e})")
+            prog.step(f"trial_{tr['trial']:03d}: skipped, the reality diverged ({e})")
             continue
         t_synth = time.perf_counter() - t1
         rc = _diagnose_subprocess(data, diag, spec, tdir / "diagnose.log", reference,
@@ -371,7 +371,7 @@ def run_blind(spec: BlindSpec, out, progress: bool = True) -> dict:
         results.append(res)
         s = res["score"]
         ok = s["top1"] or (not s["has_effect"] and not s["false_alarm"])
-        prog.step(f"trial {k + 1}: hidden {s['truth_label']} -> {s['verdict']} "
+        prog.step(f"trial_{tr['trial']:03d}: hidden {s['truth_label']} -> {s['verdict']} "
                   f"{s['predicted_label']} ({'ok' if ok else 'MISS'}"
                   f"{'' if s['detectable'] or not s['has_effect'] else ', not detectable'})")
         if reference is not None and not calibrated:
