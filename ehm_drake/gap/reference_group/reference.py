@@ -91,6 +91,8 @@ from .calibration import (
     DEGENERATE_GAIN,
     FAMILY_ALPHA,
     MIN_GAIN,
+    calibrate_cells,
+    cell_key,
     group_null_spread,
     thresholds,
 )
@@ -102,8 +104,8 @@ from .contrasts import (
     load_contrasts,
 )
 from .group import (
-    RECOMMENDED_SUBJECTS,
     ReferenceGroup,
+    group_size_caution,
     level_pairs,
     load_reference,
     model_form,
@@ -149,7 +151,9 @@ FLAT_PATH = 1e-6
 #: (a pad losing contact softens the trunk's fore-aft mode before the back
 #: support is gone), so no descent from the strength path reaches them.
 SEPARATION_REACH = 1.5
-CACHE_VERSION = "5"
+CACHE_VERSION = "6"
+#: The null's entry holding each reference subject's chi^2 sums per cell.
+CELL_NULL = "_cells"
 
 
 
@@ -368,7 +372,8 @@ def _null_job(j: int) -> dict:
     sub = g.without(j)
     r = wrap_log(g.subject_log(j) - sub.mean_log)
     res = _scorer().score(r, sub, _W["names"])
-    return {"subject": j, "gains": {n: _evidence(res[n], res["none"]) for n in _W["names"]}}
+    return {"subject": j, "gains": {n: _evidence(res[n], res["none"]) for n in _W["names"]},
+            "cells": {cell_key(c): c["chi2"] for c in localize(g.rows, res["none"]["chi_all"])}}
 
 
 def _subject_job(name: str) -> dict:
@@ -387,19 +392,20 @@ def _null_key(group: ReferenceGroup, names, anchor_key: str) -> str:
 def null_gains(group: ReferenceGroup, families, slope, base_names, names, workers=None,
                progress=None, use_cache: bool = True, anchor_key: str = "") -> dict:
     """{candidate: [held-out gain of each reference subject against the
-    others]}: the gains of subjects without any effect.  Cached."""
+    others]}: the gains of subjects without any effect, and under `CELL_NULL`
+    each subject's chi^2 sums per cell (`calibrate_cells`).  Cached."""
     path = cache_dir() / "reference_null" / f"{_null_key(group, names, anchor_key)}.json"
     cached = read_cache_json(path) if use_cache else None
     if cached is not None:
         return cached
     state = {"group": group, "families": families, "slope": slope, "base_names": base_names,
              "names": list(names)}
-    out = {n: [None] * group.size for n in names}
+    out = {n: [None] * group.size for n in [*names, CELL_NULL]}
     for r in run_jobs([(_null_job, j) for j in range(group.size)],
                       min(worker_count(workers), group.size),
                       (lambda done, total, i, r: progress(done, total)) if progress else None,
                       _init_worker, (state,)):
-        for n, g in r["gains"].items():
+        for n, g in {**r["gains"], CELL_NULL: r["cells"]}.items():
             out[n][r["subject"]] = g
     if use_cache:
         write_cache_json(path, out)
@@ -503,19 +509,6 @@ def diagnose_with_reference(data, reference, params: ModelParams | None = None, 
     if best in results:
         shown[best] = {"H_all": np.exp(group.mean_log + results[best]["signature"])}
     return Diagnosis(report, rows, shown, base_names, before, after)
-
-
-def group_size_caution(size: int) -> str | None:
-    """What a group of `size` subjects means for the thresholds, when it is
-    smaller than `group.RECOMMENDED_SUBJECTS` (None from there on)."""
-    if size >= RECOMMENDED_SUBJECTS:
-        return None
-    return (f"a reference group of {size} subjects: each candidate's threshold rests on "
-            f"{size} leave-one-out values, which scatter widely from one group to the next; "
-            f"at least {RECOMMENDED_SUBJECTS} subjects are recommended (the `lumped` "
-            f"reality's stored blind trials: an effect named on 7 of 42 no-effect "
-            f"subjects against their groups of 8, on 2 against groups of 16; hidden effects "
-            f"found in 35 of 51 trials against 43)")
 
 
 def decide(ranking: list[dict], n_significant: int) -> tuple[str, str | None, list[str]]:
@@ -624,6 +617,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                                     strict=True)),
         })
     cells_before = localize(rows, base["chi_all"])
+    cell_record = calibrate_cells(cells_before, nulls.get(CELL_NULL))
     significant = [c for c in cells_before if c["significant"]]
     verdict, best_effect, ambiguous_with = decide(ranking, len(significant))
     best = ranking[0] if ranking else None  # the supported best when there is one
@@ -647,9 +641,9 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                        f"on the group's own subjects: an effect outside the candidate library, "
                        f"or a subject outside the group's population")
     else:
-        explanation = ("the subject is within the reference group's scatter (no cell beyond it "
-                       "at p < 0.01, Bonferroni) and no candidate exceeds the gains it reaches on "
-                       "the group's own subjects")
+        explanation = ("the subject is within the reference group's scatter (no cell beyond "
+                       "what the group's own subjects reach) and no candidate exceeds the gains "
+                       "it reaches on the group's own subjects")
     held_back = held_back_note(ranking, fam) if best_effect is None else None
     if held_back:
         explanation += "; " + held_back
@@ -690,7 +684,8 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
                    "explained_reduction": 0.0, "ambiguity_margin": AMBIGUITY_MARGIN,
                    "model_floor": MODEL_FLOOR,
                    "significance": "chi^2 per cell against the group's scatter, p < 0.01 / "
-                                   "cells",
+                                   "cells, and beyond the group's own subjects (family-wise)",
+                   "cell_calibration": cell_record,
                    "candidates": names},
     }
     return report, cells_before, cells_after
