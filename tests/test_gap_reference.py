@@ -500,6 +500,7 @@ def test_reference_group_blind_run_on_a_reality(reference_blind):
     assert cal["cell_subjects"] == 4 and cal["cell_level"] == pytest.approx(0.2)
     assert all(c["group_bar"] > 0 and (not c["significant"] or c["chi2"] > c["group_bar"])
                for c in rep["localization"])
+    assert rep["significant_cells"] == sum(c["significant"] for c in rep["localization"])
     for e in rep["ranking"]:
         assert len(e["null_gains"]) == 4 and e["null_threshold"] >= 16.3
         assert e["beyond_null"] == (e["evidence"] > e["null_threshold"])

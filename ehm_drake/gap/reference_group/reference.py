@@ -649,6 +649,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
         explanation += "; " + held_back
     after = results[best["effect"]] if best else base
     cells_after = localize(rows, after["chi_all"])
+    calibrate_cells(cells_after, nulls.get(CELL_NULL))  # (the same bar after the effect)
     form = model_form(group, log_model)
     report = {
         "verdict": verdict,
