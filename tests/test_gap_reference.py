@@ -806,15 +806,19 @@ def test_effect_atlas_feedback_parts_add_up_to_the_cut_feedback():
 def test_null_threshold_level_on_measured_no_effect_subjects():
     """68 no-effect `lumped` subjects of five blind runs (seeds 2041,
     2043-2046, each against its run's group of 8; stored by
-    `bench/null_calibration.py`): each candidate's evidence against the
-    threshold from its group's leave-one-out gains.  Measured: exceeded 11
-    times in 544 (1.6 times the nominal 1.25% per candidate), an effect
-    named on 10 of the 68 (15%, above the 10% bar).  This test keeps that
-    from getting worse unnoticed (at most 2 times nominal, at least 0.4
-    times: not bought by refusing every effect) and records the trade-off
-    tried at stop 44: the cube-root gains clipped at -MIN_GAIN instead of 0
-    name at most half as many (4 of 68), but found 30 of 51 effects on the
-    fresh runs against 35 (seeds 2046 and 2047; not asserted here)."""
+    `bench/null_calibration.py`): each candidate's evidence against its
+    own bound from its group's leave-one-out gains.  Measured: exceeded 19
+    times in 544 (2.8 times the nominal 1.25% per candidate; 11 while the
+    linear bound was kept for every null, before the mostly-negative rule
+    of `null_threshold`), an effect named by the bounds alone on 17 of the
+    68; with the family-wise test, as the diagnosis judges, on 1 of the 68
+    (as before the rule).  This test keeps the bound from getting worse
+    unnoticed (at most 3 times nominal, at least 0.4 times: not bought by
+    refusing every effect), holds the whole test at the 10% bar, and
+    records the trade-off tried at stop 44: the cube-root gains clipped at
+    -MIN_GAIN instead of 0 name at most half as many, but found 30 of 51
+    effects on the fresh runs against 35 (seeds 2046 and 2047; not asserted
+    here)."""
     from ehm_drake.gap.reference_group.calibration import FAMILY_ALPHA, MIN_GAIN, null_threshold
 
     nc = bench_script("null_calibration")
@@ -823,7 +827,8 @@ def test_null_threshold_level_on_measured_no_effect_subjects():
     level = FAMILY_ALPHA / 8
     now = nc.exceedances(data, lambda g, n, s: null_threshold(g, n, borrowed_spread=s))
     assert now["tests"] == 544
-    assert 0.4 * level < now["exceedances"] / now["tests"] < 2.0 * level
+    assert 0.4 * level < now["exceedances"] / now["tests"] < 3.0 * level
+    assert nc.family_named(data)["named"] <= FAMILY_ALPHA * 68
     clipped = nc.exceedances(data, nc.clipped_at(-MIN_GAIN))
     assert 0 < clipped["named"] <= now["named"] / 2
     # The clip at 0 is the library's default.
@@ -888,6 +893,15 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
     arms = [-439, -509, -943, -880, -115, -737, -189, -119]
     thr = null_threshold(arms, 8, alpha=0.1)
     assert thr > 300
+    # Half the subjects at 0..23, half far below (the seat foam's null on a
+    # `lumped` group of 32: fits that overfit the training rows): the bar
+    # comes from the upper half, not from the negative tail's spread (1,775
+    # with the linear bound).
+    foam = [-3698, -3270, -1737, -1090, -951, -657, -654, -627, -327, -232, -192, -136,
+            -75, -34, -13, -5, -1, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 4, 5, 11, 15, 23]
+    assert null_threshold(foam, 9) < 3 * max(foam)
+    # The same upper half with no negative tail: the same bar.
+    assert null_threshold(foam, 9) == null_threshold(np.maximum(foam, 0.0), 9)
     assert null_threshold([0.0] * 8, 8) == MIN_GAIN
     spread = [0, 30, 16, 0, 220, 0, 0, 0]
     assert null_threshold(spread, 8) > max(220, null_threshold(spread, 1))
