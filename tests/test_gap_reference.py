@@ -893,7 +893,7 @@ def test_null_threshold_covers_the_spread_not_only_the_largest_gain():
     arms = [-439, -509, -943, -880, -115, -737, -189, -119]
     thr = null_threshold(arms, 8, alpha=0.1)
     assert thr > 300
-    # Half the subjects at 0..23, half far below (the seat foam's null on a
+    # Half the subjects at -1..23, half far below (the seat foam's null on a
     # `lumped` group of 32: fits that overfit the training rows): the bar
     # comes from the upper half, not from the negative tail's spread (1,775
     # with the linear bound).
