@@ -69,7 +69,17 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     degenerate = borrowed_spread is not None and bool(np.all(np.abs(g) <= DEGENERATE_GAIN))
     if degenerate:
         spread = max(spread, float(borrowed_spread))
-    bound = g.mean() + q * spread
+    # Where half the subjects or more are near 0 (above -MIN_GAIN) or above,
+    # the linear bound is left out: the fit stays off or
+    # helps there, and the negative tail is fits that overfit the training
+    # rows, which widens the linear bound without saying how far above 0
+    # the next subject reaches.  On `lumped` the seat foam's null was half
+    # -1..23 and half -3,698..-5: a linear bound of 1,775 against a largest
+    # gain of 23, and foams with evidence 501 and 515 went unnamed.  The
+    # cube-root bound alone there; false alarms stay with the family-wise
+    # test (`thresholds`).
+    linear = degenerate or bool(np.median(g) < -MIN_GAIN)
+    bound = g.mean() + q * spread if linear else -math.inf
     # The same bound on the cube roots of the gains clipped at 0 (Wilson &
     # Hilferty 1931: the cube root of a chi^2 variable is nearly normal).
     # The null gains are skewed to the right: most near 0, one subject in
@@ -89,16 +99,6 @@ def null_threshold(null, n_candidates: int, alpha: float = FAMILY_ALPHA,
     # hundred) keep the linear bound, the higher one there.
     c = np.cbrt(np.maximum(g, clip))
     cube_bound = float(c.mean() + q * c.std(ddof=1)) ** 3
-    if np.median(g) >= -MIN_GAIN and not degenerate:
-        # Half the subjects or more near 0 (above -MIN_GAIN) or above: the
-        # fit stays off or helps there, and the negative tail is fits that overfit the
-        # training rows, which widens the linear bound without saying how
-        # far above 0 the next subject reaches.  On `lumped` the seat
-        # foam's null was half -1..23 and half -3,698..-5: a linear bound of
-        # 1,775 against a largest gain of 23, and foams with evidence 501
-        # and 515 went unnamed.  The cube-root bound alone there; false
-        # alarms stay with the family-wise test (`thresholds`).
-        bound = -math.inf
     return float(max(MIN_GAIN, bound, cube_bound))
 
 
@@ -195,13 +195,23 @@ def thresholds(nulls: dict, evidence: dict, alpha: float = FAMILY_ALPHA,
         g = np.array([np.nan if x is None else x for x in nulls[c]], float)
         ok = np.isfinite(g)
         ratio[ok, i] = g[ok] / scale[c]
-    scores = np.sort(ratio.max(axis=1))
-    k = min(k_subj, math.ceil((1 - alpha) * (k_subj + 1)))
-    score = float(scores[k - 1])
+    score, k, level = conformal_bar(ratio.max(axis=1), alpha)
     thr = {c: max(bounds[c], scale[c] * score) for c in names}
-    return thr, bounds, {"score": score, "rank": int(k), "level": float(1 - k / (k_subj + 1)),
+    return thr, bounds, {"score": score, "rank": k, "level": level,
                          "subjects": int(k_subj),
                          "subject_score": float(max(evidence[c] / scale[c] for c in names))}
+
+
+def conformal_bar(scores, alpha: float) -> tuple[float, int, float]:
+    """The bar of a full conformal test from the K group subjects' `scores`:
+    the k-th smallest, k = ceil((1 - alpha)(K + 1)) (the largest with fewer
+    than 1 / alpha - 1 subjects).  A subject exchangeable with the group's
+    exceeds it with probability at most the level 1 - k / (K + 1).
+    Returns (bar, k, level)."""
+    s = np.sort(np.asarray(scores, float))
+    K = len(s)
+    k = min(K, math.ceil((1 - alpha) * (K + 1)))
+    return float(s[k - 1]), int(k), float(1 - k / (K + 1))
 
 
 def family_scales(values: dict) -> dict:
@@ -258,11 +268,9 @@ def calibrate_cells(cells: list[dict], group_cells: list[dict] | None,
     G = np.array([[g[k] for k in keys] for g in group_cells], float)
     s = np.array([c["chi2"] for c in cells], float)
     scale = np.maximum(np.median(np.vstack([G, s]), axis=0), 1e-12)
-    K = len(G)
-    k = min(K, math.ceil((1 - alpha) * (K + 1)))
-    bar = float(np.sort((G / scale).max(axis=1))[k - 1])
+    bar, _, level = conformal_bar((G / scale).max(axis=1), alpha)
     for c, sc in zip(cells, scale, strict=True):
         c["group_bar"] = float(sc * bar)
         c["significant"] = bool(c["significant"] and c["chi2"] > c["group_bar"])
-    return {"cell_bar_score": bar, "cell_level": float(1 - k / (K + 1)), "cell_subjects": K,
+    return {"cell_bar_score": bar, "cell_level": level, "cell_subjects": len(G),
             "subject_cell_score": float((s / scale).max()) if len(s) else 0.0}
