@@ -1017,8 +1017,10 @@ def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_eff
     assert both[name]["level_coords"][0] == pytest.approx(1.5, rel=0.05)
     assert both[name]["level_gain"] > 100
     assert alone[name]["level_gain"] < 0.01 * both[name]["level_gain"]
-    assert _evidence(both[name], both["none"]) == pytest.approx(
-        _gain(both[name], both["none"]) + both[name]["level_gain"])
+    # (Scored at the level-only fit's size too, which is the all-rows fit's
+    # here: the larger of the two scores, to 1e-4.)
+    plain = _gain(both[name], both["none"]) + both[name]["level_gain"]
+    assert plain <= _evidence(both[name], both["none"]) == pytest.approx(plain, rel=1e-4)
     for res in (both, alone):
         assert res["visceral_mass"]["level_gain"] == 0.0
         assert res["visceral_mass"]["level_coords"] is None
@@ -1062,7 +1064,11 @@ def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_i
         assert t["level_gain_at_fit"] > 50
         assert _evidence(t, true["none"]) == pytest.approx(_gain(t, true["none"]) + t["level_gain"])
     assert mimic["cocontraction"]["amplitude_driven"]
-    assert _evidence(mimic["cocontraction"], mimic["none"]) == 0.0
+    # (Scored at its level-only fit, which finds no such effect, it gains
+    # nothing either.)
+    co = mimic["cocontraction"]
+    assert abs(_evidence(co, mimic["none"])) < 0.02 * (_gain(co, mimic["none"])
+                                                       + co["level_gain"])
     sep = mimic["backrest_separation"]
     assert not sep["amplitude_driven"]
     assert _evidence(sep, mimic["none"]) == pytest.approx(_gain(sep, mimic["none"])
@@ -1071,6 +1077,41 @@ def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_i
     neg = {**mimic["cocontraction"], "level_gain": -5.0 - _gain(mimic["cocontraction"],
                                                                  mimic["none"])}
     assert _evidence(neg, mimic["none"]) == pytest.approx(-5.0)
+
+
+def test_an_amplitude_driven_candidate_is_also_scored_at_the_size_its_level_fit_gives():
+    """A subject with an effect that grows with the level (strength 1.5)
+    and a structural difference along the same change that does not
+    (3 x the shape at both levels).  The all-rows fit and its refits take
+    the structure for more effect; their held-out predictions at the other
+    level miss, and their level differences contradict the subject's.  The
+    level-only fit finds the true strength: scored held out at that size
+    the candidate gains more, and the larger score is its evidence.  A
+    candidate that is not amplitude-driven (a separation) keeps the
+    all-rows score alone."""
+    from ehm_drake.gap.reference_group.reference import _evidence, _gain
+
+    g = ReferenceGroup.from_labs(_level_group_labs())
+    f, lv = g.rows.freq, g.rows.level
+    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
+
+    def sig_of(c):
+        return float(c[0]) * lv * shape
+
+    scorer = _stub_scorer(g, sig_of, 20.0)
+    names = ["cocontraction", "backrest_separation"]
+    res = scorer.score(sig_of([1.5]) + 3.0 * shape, g, names)
+    base = res["none"]
+    co = res["cocontraction"]
+    assert co["level_coords"][0] == pytest.approx(1.5, rel=0.05)
+    assert co["coords"][0] > 3.0  # (the all-rows fit takes the structure in)
+    at_level = float(np.nansum(base["chi_heldout"]) - np.nansum(co["chi_heldout_level_fit"]))
+    refits = _gain(co, base) + co["level_gain"] + min(co["level_gain_at_fit"], 0.0)
+    assert at_level > 0 and at_level + co["level_gain"] > refits + 50
+    assert _evidence(co, base) == pytest.approx(at_level + co["level_gain"])
+    sep = res["backrest_separation"]
+    assert "chi_heldout_level_fit" not in sep
+    assert _evidence(sep, base) == pytest.approx(_gain(sep, base) + sep["level_gain"])
 
 
 def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():

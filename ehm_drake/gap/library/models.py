@@ -215,7 +215,7 @@ class TestInput:
 #: the compression's standard deviation), the friction's Jenkins slider
 #: sticks below mu N0, co-contraction adds c a_rms kp.  Each of them changes
 #: the response only as far as the level does, so all of its signature on
-#: a subject comes with level differences (`reference._evidence` holds it
+#: a subject comes with level differences (`scatter._evidence` holds it
 #: to them).  A backrest separation is level-dependent but not amplitude
 #: driven: a pad beyond reach is gone at any amplitude.
 AMPLITUDE_DRIVEN = ("seat_foam_stiffening", "seat_friction", "cocontraction", "softening")

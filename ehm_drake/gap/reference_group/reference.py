@@ -114,6 +114,8 @@ from .group import (
 from .scatter import (
     DESCENT_EVALUATIONS,
     _descend,
+    _evidence,
+    _gain,
     _LevelDesign,
     profile_nuisance,
     scatter_residual,
@@ -318,32 +320,18 @@ class _Scorer:
                          "amplitude_driven": cand.amplitude_driven}
             if level is not None and cand.level_dependent:
                 out[name].update(level.fit(sig, refresh, lo, hi, [*starts, x]))
+                if cand.amplitude_driven:
+                    # Held out also at the level-only fit's size (`_evidence`),
+                    # the statistics refreshed there once from the nominal ones.
+                    xl = np.asarray(out[name]["level_coords"])
+                    sig_l, refresh_l, *_ = self.signature_fn(cand)
+                    refresh_l(xl)
+                    s_level = sig_l(xl)
+                    held = np.full(len(r), np.nan)
+                    for m in self.test_masks:
+                        held[m] = rows_chi((r - s_level) * sw, ~m, m)[0][m]
+                    out[name]["chi_heldout_level_fit"] = held
         return out
-
-
-def _gain(res: dict, base: dict) -> float:
-    return float(np.nansum(base["chi_heldout"]) - np.nansum(res["chi_heldout"]))
-
-
-def _evidence(res: dict, base: dict) -> float:
-    """A candidate's evidence: its held-out chi^2 gain on all rows plus its
-    gain on the level differences (`_LevelDesign`; 0 for a candidate that
-    does not depend on the level).  Thresholded by the same sum on the
-    group's own subjects, so the two parts need no common scale.
-
-    An amplitude-driven candidate (`models.AMPLITUDE_DRIVEN`) changes the
-    response only as far as the level does, so its fit to all rows predicts
-    level differences.  Where the subject does not show them
-    (``level_gain_at_fit`` < 0) it mimics a level-independent difference,
-    and that loss is taken off its evidence, down to zero.  On a blind run
-    of `spine5`, friction's all-rows fits lose 2,765-4,416 there on the 5
-    trials it was wrongly named on and gain 3,358-11,170 on true friction;
-    a separation's fit loses 70,000 on true separations (left out)."""
-    e = _gain(res, base) + float(res.get("level_gain", 0.0))
-    loss = float(res.get("level_gain_at_fit", 0.0))
-    if res.get("amplitude_driven") and loss < 0:
-        e = max(e + loss, min(e, 0.0))
-    return e
 
 
 # ---------------------------------------------------------------------------
@@ -604,6 +592,9 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "delta_bic": float(-gain + k * math.log(2 * n_rows)),
             "gap_train": g_t, "gap_heldout": g_h,
             "heldout_gain": gain, "level_gain": float(r.get("level_gain", 0.0)),
+            "heldout_gain_level_fit": (
+                None if r.get("chi_heldout_level_fit") is None else
+                float(np.nansum(base["chi_heldout"]) - np.nansum(r["chi_heldout_level_fit"]))),
             "level_gain_at_fit": float(r.get("level_gain_at_fit", 0.0)),
             "amplitude_driven": cand.amplitude_driven,
             "level_params": (r.get("level_params") if "params" in r else
