@@ -1114,6 +1114,18 @@ def test_an_amplitude_driven_candidate_is_also_scored_at_the_size_its_level_fit_
     assert _evidence(sep, base) == pytest.approx(_gain(sep, base) + sep["level_gain"])
 
 
+def test_the_report_gives_the_level_fit_score_beside_the_all_rows_one():
+    """The reference report's ranking shows an amplitude-driven candidate's
+    held-out gain at its level-only fit beside the all-rows one, and none
+    for a candidate not scored there."""
+    from ehm_drake.gap.report import _heldout
+
+    assert _heldout({"heldout_gain": -2209.4, "heldout_gain_level_fit": 130.6}) == \
+        "-2209 (131 at the level fit)"
+    assert _heldout({"heldout_gain": 5106.2, "heldout_gain_level_fit": None}) == "5106"
+    assert _heldout({"heldout_gain": 12.0}) == "12"
+
+
 def test_a_delay_candidate_is_fitted_from_off_and_not_started_in_weak_wells():
     """A delay's (or a linear extension's) signature is smooth at "off", so
     the descent from "off" reaches a weak effect by itself (it did not while

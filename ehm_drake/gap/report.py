@@ -76,6 +76,14 @@ def _at_fit(e: dict) -> str:
     return v if e.get("amplitude_driven") else f"{v} (not used)"
 
 
+def _heldout(e: dict) -> str:
+    """A ranking entry's held-out gain, and where an amplitude-driven
+    candidate was also scored at its level-only fit's size, that score."""
+    v = f"{e['heldout_gain']:.0f}"
+    at_level = e.get("heldout_gain_level_fit")
+    return v if at_level is None else f"{v} ({at_level:.0f} at the level fit)"
+
+
 def _pct(x) -> str:
     return "n/a" if x is None else f"{100 * x:.0f}%"
 
@@ -144,13 +152,15 @@ def markdown(rep: dict, figures: list[str]) -> str:
                   "where the subject's structural difference from the group cancels -- "
                   "exceeds the threshold set by the group's own subjects (each against the "
                   "others). An effect driven by the vibration's amplitude (foam, friction, "
-                  "co-contraction) loses the evidence its all-rows fit contradicts on the "
-                  "level differences (down to zero). Of the candidates beyond their "
+                  "co-contraction, softening) loses the evidence its all-rows fit contradicts "
+                  "on the level differences (down to zero); tested at two levels, it is also "
+                  "scored held out at the size its fit to the level differences gives, and "
+                  "the larger score is its evidence. Of the candidates beyond their "
                   "threshold, the one furthest beyond it is named.", "",
                   "| effect | held-out chi^2 gain | level-difference gain | at the all-rows fit "
                   "| evidence | own bound | threshold (with the family-wise test) | beyond |",
                   "|---|---|---|---|---|---|---|---|"]
-        lines += [f"| {e['effect']} | {e['heldout_gain']:.0f} | "
+        lines += [f"| {e['effect']} | {_heldout(e)} | "
                   f"{e.get('level_gain', 0.0):.0f} | "
                   f"{_at_fit(e)} | "
                   f"{e.get('evidence', e['heldout_gain']):.0f} | "
