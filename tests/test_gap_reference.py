@@ -1032,6 +1032,19 @@ def test_the_level_differences_cancel_the_subjects_structure_but_not_a_level_eff
     assert res[name]["level_gain"] == 0.0
 
 
+def _level_effect_scorer(upper):
+    """A group on z at 0.3 and 0.6 m/s^2, a change `shape` around 5 Hz and a
+    stub scorer whose candidates change the response by c x level x shape."""
+    g = ReferenceGroup.from_labs(_level_group_labs())
+    f, lv = g.rows.freq, g.rows.level
+    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
+
+    def sig_of(c):
+        return float(c[0]) * lv * shape
+
+    return g, shape, sig_of, _stub_scorer(g, sig_of, upper)
+
+
 def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_its_evidence():
     """A subject differs from the group by a resonance change that is the
     same at both levels.  A candidate whose change grows with the level fits
@@ -1044,14 +1057,7 @@ def test_an_amplitude_driven_candidate_mimicking_a_level_independent_gap_loses_i
     the evidence is the held-out plus the level gain."""
     from ehm_drake.gap.reference_group.reference import _evidence, _gain
 
-    g = ReferenceGroup.from_labs(_level_group_labs())
-    f, lv = g.rows.freq, g.rows.level
-    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
-
-    def sig_of(c):
-        return float(c[0]) * lv * shape
-
-    scorer = _stub_scorer(g, sig_of, 10.0)
+    g, shape, sig_of, scorer = _level_effect_scorer(10.0)
     names = ["cocontraction", "backrest_separation"]
     mimic = scorer.score(4.0 * shape, g, names)  # the same at 0.3 and 0.6 m/s^2
     true = scorer.score(sig_of([1.5]), g, names)
@@ -1091,21 +1097,14 @@ def test_an_amplitude_driven_candidate_is_also_scored_at_the_size_its_level_fit_
     all-rows score alone."""
     from ehm_drake.gap.reference_group.reference import _evidence, _gain
 
-    g = ReferenceGroup.from_labs(_level_group_labs())
-    f, lv = g.rows.freq, g.rows.level
-    shape = np.exp(-0.5 * ((f - 5.0) / 1.0) ** 2) * (0.5 - 0.3j)
-
-    def sig_of(c):
-        return float(c[0]) * lv * shape
-
-    scorer = _stub_scorer(g, sig_of, 20.0)
+    g, shape, sig_of, scorer = _level_effect_scorer(20.0)
     names = ["cocontraction", "backrest_separation"]
     res = scorer.score(sig_of([1.5]) + 3.0 * shape, g, names)
     base = res["none"]
     co = res["cocontraction"]
     assert co["level_coords"][0] == pytest.approx(1.5, rel=0.05)
     assert co["coords"][0] > 3.0  # (the all-rows fit takes the structure in)
-    at_level = float(np.nansum(base["chi_heldout"]) - np.nansum(co["chi_heldout_level_fit"]))
+    at_level = _gain({"chi_heldout": co["chi_heldout_level_fit"]}, base)
     refits = _gain(co, base) + co["level_gain"] + min(co["level_gain_at_fit"], 0.0)
     assert at_level > 0 and at_level + co["level_gain"] > refits + 50
     assert _evidence(co, base) == pytest.approx(at_level + co["level_gain"])

@@ -116,6 +116,7 @@ from .scatter import (
     _descend,
     _evidence,
     _gain,
+    _gain_at_level_fit,
     _LevelDesign,
     profile_nuisance,
     scatter_residual,
@@ -592,9 +593,7 @@ def _assemble(lab, group, idx, results, names, nulls, anchor, log_model, base_na
             "delta_bic": float(-gain + k * math.log(2 * n_rows)),
             "gap_train": g_t, "gap_heldout": g_h,
             "heldout_gain": gain, "level_gain": float(r.get("level_gain", 0.0)),
-            "heldout_gain_level_fit": (
-                None if r.get("chi_heldout_level_fit") is None else
-                float(np.nansum(base["chi_heldout"]) - np.nansum(r["chi_heldout_level_fit"]))),
+            "heldout_gain_level_fit": _gain_at_level_fit(r, base),
             "level_gain_at_fit": float(r.get("level_gain_at_fit", 0.0)),
             "amplitude_driven": cand.amplitude_driven,
             "level_params": (r.get("level_params") if "params" in r else

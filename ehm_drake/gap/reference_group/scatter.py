@@ -126,6 +126,13 @@ def _gain(res: dict, base: dict) -> float:
     return float(np.nansum(base["chi_heldout"]) - np.nansum(res["chi_heldout"]))
 
 
+def _gain_at_level_fit(res: dict, base: dict) -> float | None:
+    """The held-out gain at the level-only fit's size (None where the
+    candidate was not scored there)."""
+    held = res.get("chi_heldout_level_fit")
+    return None if held is None else _gain({"chi_heldout": held}, base)
+
+
 def _evidence(res: dict, base: dict) -> float:
     """A candidate's evidence: its held-out chi^2 gain on all rows plus its
     gain on the level differences (`_LevelDesign`; 0 for a candidate that
@@ -156,8 +163,7 @@ def _evidence(res: dict, base: dict) -> float:
     loss = float(res.get("level_gain_at_fit", 0.0))
     if res.get("amplitude_driven") and loss < 0:
         e = max(e + loss, min(e, 0.0))
-    held = res.get("chi_heldout_level_fit")
-    if held is not None:
-        e = max(e, float(np.nansum(base["chi_heldout"]) - np.nansum(held))
-                + float(res.get("level_gain", 0.0)))
+    at_level = _gain_at_level_fit(res, base)
+    if at_level is not None:
+        e = max(e, at_level + float(res.get("level_gain", 0.0)))
     return e
