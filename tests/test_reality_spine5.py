@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ehm_drake import jit
 from ehm_drake.realities import CHANNEL_NAMES, RealityError, RealityRecord
-from ehm_drake.realities.spine5 import Spine5Reality
+from ehm_drake.realities.spine5 import Spine5Reality, kernel
 from ehm_drake.realities.spine5 import params as P
 from ehm_drake.realities.spine5.body import G, build_body
 from ehm_drake.realities.spine5.check import apparent_mass, peak, resonance, transmissibility
@@ -357,6 +358,63 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
+@pytest.mark.skipif(not jit.available(), reason="numba is not installed: the NumPy laws "
+                                                "alone run")
+@pytest.mark.parametrize("effects", [(), ("seat_foam_stiffening", "softening", "cocontraction"),
+                                     ("seat_cushion_dynamics", "arms", "reflex_delay")])
+def test_the_compiled_laws_are_the_numpy_laws(reality, effects):
+    """The compiled laws (`kernel.contact`, `kernel.muscles`) give the NumPy
+    laws' generalized forces, point forces, next shear anchors, penetrations,
+    slipping points, joint torques and next discrete state to 1e-12 at
+    disturbed states near the seated one, moving and at rest: on the fixed
+    seat; with the foam's stiffening, the tissue's softening and
+    co-contraction; with the moving cushion, the hands on the thighs and a
+    longer reflex delay."""
+    active = {name: reality.effect_values(name, 1.0) for name in effects}
+    prep = reality.prepare(reality.nominal_subject(), active)
+    model = reality.build(prep.values, prep.effects)
+    build_diagram(model)
+    forces = model.forces
+    if "cushion" in model.body.segments:
+        model.set_cushion_preload(forces, prep.cushion_load)
+    forces.set_offsets(prep.offsets)
+    rng = np.random.default_rng(7)
+    forces.configure(prep.q_ref, prep.a_ff, prep.R_head_ref, rng.normal(0.0, 1.0, (50, 3)))
+    lay = forces.layout
+    slipping = loaded = 0
+
+    def close(name, a, b):
+        scale = max(float(np.max(np.abs(a))), 1.0)
+        assert np.max(np.abs(a - b)) <= 1e-12 * scale, name
+
+    for step in range(5):
+        x = prep.x.copy()
+        x[:forces.nq] += rng.normal(0.0, 2e-3, forces.nq)  # mm and mrad off the seated pose
+        x[forces.nq:] += rng.normal(0.0, 0.05, forces.nv)
+        xd = prep.xd + rng.normal(0.0, 1e-4, len(prep.xd))
+        xd[lay["ms"]] = abs(xd[lay["ms"]])
+        forces.kinematics(x)
+        anchors = xd[lay["anchor"]].reshape(-1, 2)
+        for dslow in (xd[lay["dslow"]], None):
+            ref = forces._contact_numpy(x, anchors, dslow)
+            got = forces.contact(x, anchors, dslow)
+            for name, a, b in zip(("tau", "F", "anchors", "d"), ref, got, strict=False):
+                close(name, a, b)
+            np.testing.assert_array_equal(ref[4], got[4])
+            slipping += int(ref[4].sum())
+            loaded += int(np.sum(ref[3] > 0))
+        phi, w = forces.head_signals()
+        k = 10 + step
+        args = (k, x, xd, forces.accel[k], phi, w, ref[3], ref[2], step % 2 == 0)
+        T_ref, xn_ref = forces._muscles_numpy(*args)
+        T, xn = kernel.muscles(*args[:5], np.ascontiguousarray(w), *args[6:],
+                               *kernel.pack_muscles(forces))
+        close("T", T_ref, T)
+        close("next state", xn_ref, xn)
+    # The laws' branches run: points in contact, some of them slipping.
+    assert slipping > 0 and loaded > 0
+
+
 def test_module_imports_nothing_of_the_ehm_model():
     files = sorted(PACKAGE.glob("*.py"))
     assert len(files) >= 6
@@ -364,7 +422,9 @@ def test_module_imports_nothing_of_the_ehm_model():
         for mod in _imports(f):
             assert not any(mod == b or mod.startswith(b + ".") for b in FORBIDDEN), (f.name, mod)
             if mod.startswith("ehm_drake"):
-                assert mod.startswith(("ehm_drake.realities", "ehm_drake.signals")), (f.name, mod)
+                # (ehm_drake.jit: numba's switch, no model code)
+                assert mod.startswith(("ehm_drake.realities", "ehm_drake.signals",
+                                       "ehm_drake.jit")), (f.name, mod)
 
 
 def test_registered_under_its_name():

@@ -12,6 +12,7 @@ from pydrake.multibody.tree import (
 )
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
+from . import kernel
 from .model import (
     FOAM_MAX_FACTOR,
     MARKER_SEGMENTS,
@@ -170,6 +171,8 @@ class Spine5Forces(LeafSystem):
         self._memo_t = None
         self._memo_x = None
         self._memo = None
+        self._packed = None  # (settings, `kernel.pack`'s tables), made when used
+        self._packed_muscles = None  # (q_ref, a_ff, `kernel.pack_muscles`' tables)
 
     # ------------------------------------------------------------ utilities
     def set_offsets(self, off):
@@ -241,7 +244,25 @@ class Spine5Forces(LeafSystem):
     def contact(self, x, anchors, dslow):
         """Contact forces at plant state x (kinematics already evaluated);
         `dslow` None: at rest (no dynamic foam compression).  Returns (tau,
-        F per point (n,3), new anchors (n,2), d (n,), slipping mask)."""
+        F per point (n,3), new anchors (n,2), d (n,), slipping mask).  The
+        compiled law (`kernel.contact`) where numba is, else the NumPy one."""
+        if kernel.contact is None:
+            return self._contact_numpy(x, anchors, dslow)
+        # Packed again whenever a setting is replaced (the offsets by
+        # `set_offsets`, the cushion's rest position by the statics).
+        settings = (self.off, self.cushion_z0)
+        packed = self._packed
+        if packed is None or packed[0][0] is not self.off or packed[0][1] != self.cushion_z0:
+            packed = self._packed = (settings, kernel.pack(self))
+        dynamic = dslow is not None
+        return kernel.contact(np.ascontiguousarray(x), self.P, self.Jp,
+                              np.ascontiguousarray(anchors),
+                              np.ascontiguousarray(dslow) if dynamic else self.off, dynamic,
+                              *packed[1])
+
+    def _contact_numpy(self, x, anchors, dslow):
+        """`contact`'s NumPy law: the reference of the compiled one and its
+        fallback without numba."""
         nq = self.nq
         q, v = x[:nq], x[nq:]
         P = self.P
@@ -339,19 +360,42 @@ class Spine5Forces(LeafSystem):
             Jc = self.plant.CalcJacobianCenterOfMassTranslationalVelocity(
                 self.ctx, JacobianWrtVariable.kV, self.W, self.W)
             tau -= self.M_total * (Jc.T @ a_s)
-        # Joints: passive SLS and muscles.
+        phi, w = self.head_signals()
+        cc_on = t >= self.t_cc_start - 0.5 * self.h
+        if kernel.muscles is None:
+            T, xn = self._muscles_numpy(k, x, xd, a_s, phi, w, dpen, new_anchor, cc_on)
+        else:
+            packed = self._packed_muscles  # (again when `configure` replaced a setting)
+            if packed is None or packed[0] is not self.q_ref or packed[1] is not self.a_ff:
+                packed = self._packed_muscles = (self.q_ref, self.a_ff,
+                                                 kernel.pack_muscles(self))
+            T, xn = kernel.muscles(k, np.ascontiguousarray(x), np.ascontiguousarray(xd),
+                                   np.ascontiguousarray(a_s), phi, np.ascontiguousarray(w), dpen,
+                                   new_anchor, cc_on, *packed[2])
+        tau[d.iv] += T
+        return tau, xn, F, k
+
+    def _muscles_numpy(self, k, x, xd, a_s, phi, w, dpen, new_anchor, cc_on):
+        """The joints' passive and muscle torques T (per DoF) and the next
+        discrete state (Maxwell states, activations, the delay line's new
+        row, anchors, the foam's slow compression, the running mean square
+        of the seat acceleration): the NumPy law, reference of the compiled
+        `kernel.muscles` and its fallback without numba."""
+        lay = self.layout
+        d = self.m.dofs
+        q, v = x[:self.nq], x[self.nq:]
         th = q[d.iq]
         thd = v[d.iv]
         q_d = xd[lay["q_d"]]
         act = xd[lay["act"]]
         buf = xd[lay["buf"]].reshape(self.L, self.ncol)
         ms = xd[lay["ms"]][0]
+        dslow = xd[lay["dslow"]]
         gain = 1.0 + self.c_cc * math.sqrt(max(ms, 0.0)) * d.cc_mask
         # Muscle torque: saturating, of the activation and the intrinsic
         # (instantaneous) stiffness.
         T = self.passive_torque(th, q_d) + d.tmax * np.tanh(
             act - gain * d.ki * (th - self.q_ref) / d.tmax)
-        tau[d.iv] += T
         # Delayed proprioceptive and vestibular signals -> next activation.
         delayed = buf[(k - self.delay_steps) % self.L]
         nj = self.nj
@@ -360,7 +404,6 @@ class Spine5Forces(LeafSystem):
         u[self.m.vest_rows] -= 0.5 * (self.kp_vest * ph[self.m.vest_cols]
                                       + self.kd_vest * wh[self.m.vest_cols])
         a_next = act + self.alpha_act * (self.a_ff + u / d.tmax - act)
-        phi, w = self.head_signals()
         xn = xd.copy()
         xn[lay["q_d"]] = th + (q_d - th) * d.decay
         xn[lay["act"]] = a_next
@@ -373,9 +416,9 @@ class Spine5Forces(LeafSystem):
         xn[lay["anchor"]] = new_anchor.reshape(-1)
         inside = dpen > 0
         xn[lay["dslow"]] = np.where(inside, dslow + self.foam_alpha * (dpen - dslow), dpen)
-        if t >= self.t_cc_start - 0.5 * self.h:
+        if cc_on:
             xn[lay["ms"]] = ms + self.cc_alpha * (float(a_s @ a_s) - ms)
-        return tau, xn, F, k
+        return T, xn
 
     def _check(self, t, q, v):
         """Stop a run that left the physical range (cheap on the good path)."""
