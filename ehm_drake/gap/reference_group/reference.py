@@ -257,12 +257,18 @@ class _Scorer:
             chi[where] = np.abs(x - A_all @ u)[where] ** 2
             return chi, float(u @ u)
 
+        def held_out(x):
+            """Each test's rows scored with the others' nuisance fit, the
+            residual `x` fixed."""
+            chi = np.full(len(x), np.nan)
+            for m in self.test_masks:
+                chi[m] = rows_chi(x, ~m, m)[0][m]
+            return chi
+
         every = np.ones(len(r), bool)
         x0 = r * sw
         chi0_all, p0 = rows_chi(x0, every, every)
-        chi0_held = np.full(len(r), np.nan)
-        for m in self.test_masks:
-            chi0_held[m] = rows_chi(x0, ~m, m)[0][m]
+        chi0_held = held_out(x0)
         out = {"none": {"chi_all": chi0_all, "chi_heldout": chi0_held, "coords": [],
                         "cost": float(np.sum(chi0_all) + p0), "level_gain": 0.0}}
         cands = {name: Candidate(tuple(name.split("+"))) for name in names}
@@ -327,11 +333,7 @@ class _Scorer:
                     xl = np.asarray(out[name]["level_coords"])
                     sig_l, refresh_l, *_ = self.signature_fn(cand)
                     refresh_l(xl)
-                    s_level = sig_l(xl)
-                    held = np.full(len(r), np.nan)
-                    for m in self.test_masks:
-                        held[m] = rows_chi((r - s_level) * sw, ~m, m)[0][m]
-                    out[name]["chi_heldout_level_fit"] = held
+                    out[name]["chi_heldout_level_fit"] = held_out((r - sig_l(xl)) * sw)
         return out
 
 
