@@ -20,14 +20,6 @@ from ehm_drake.realities import get_reality
 from ehm_drake.signals import make_seat_signal
 
 
-def _nominal(reality):
-    if hasattr(reality, "nominal_subject"):
-        return reality.nominal_subject()
-    subject = reality.subject(0)
-    subject["factors"] = {k: 1.0 for k in subject["factors"]}
-    return subject
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -40,7 +32,7 @@ def main() -> None:
         reality = get_reality(name.strip())
         h = reality.time_step
         t0 = time.perf_counter()
-        prepared = reality.prepare(_nominal(reality), {})
+        prepared = reality.prepare(reality.nominal_subject(), {})
         t_prep = time.perf_counter() - t0
         reality.run_test(prepared, make_seat_signal("random", a.direction, 0.3, 2.0, 7, h,
                                                     0.5, 1.0))

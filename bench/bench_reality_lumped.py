@@ -50,11 +50,7 @@ def main():
     ap.add_argument("--duration", type=float, default=60.0)
     a = ap.parse_args()
     reality = LumpedReality()
-    if a.seed is None:
-        subject = reality.subject(0)
-        subject["factors"] = {k: 1.0 for k in subject["factors"]}
-    else:
-        subject = reality.subject(a.seed)
+    subject = reality.nominal_subject() if a.seed is None else reality.subject(a.seed)
     prep = reality.prepare(subject, {})
     s = prep.summary
     print(f"settled: {s['mass_kg']:.1f} kg, {s['dof']} DoF, vertical balance "

@@ -253,6 +253,20 @@ def test_subject_scatter_is_seeded_symmetric_and_within_twenty_percent(reality):
         assert 0.8 * 77.0 < plan.total_mass < 1.2 * 77.0
 
 
+def test_the_nominal_subject_is_the_unscattered_one(reality):
+    """Every factor 1, so every value the parameter table's own: the table's
+    77 kg 50th-percentile adult male, amid the seeded subjects."""
+    nominal = reality.nominal_subject()
+    assert nominal["seed"] is None and nominal["spread"] == 0.0
+    assert set(nominal["factors"]) == set(reality.subject(SEED)["factors"])
+    assert set(nominal["factors"].values()) == {1.0}
+    for k, v in nominal["values"].items():
+        assert np.allclose(v, par.PARAMETERS[k].value), k
+    assert nominal["body_mass_kg"] == pytest.approx(77.0, abs=0.5)
+    masses = [reality.subject(s)["body_mass_kg"] for s in range(8)]
+    assert min(masses) < nominal["body_mass_kg"] < max(masses)
+
+
 def test_same_seed_same_bytes(reality, subject, prepared, mixed_signal, baseline_record):
     again = reality.prepare(reality.subject(SEED), {})
     assert pickle.dumps(again.x_plant) == pickle.dumps(prepared.x_plant)

@@ -87,7 +87,7 @@ class RealityRecord:
 class Reality:
     """A seated-human simulation that is not the EHM model.
 
-    Subclasses set the class attributes and implement the four methods.
+    Subclasses set the class attributes and implement the methods.
     Everything a method returns must be picklable (tests run in worker
     processes) and deterministic given its arguments (same seed, same bytes).
     """
@@ -104,6 +104,10 @@ class Reality:
     def subject(self, seed: int) -> dict[str, Any]:
         """A seeded virtual subject (the reality's own inter-subject scatter),
         as JSON-able data: it goes to the key file, never to the data."""
+        raise NotImplementedError
+
+    def nominal_subject(self) -> dict[str, Any]:
+        """The reality's unscattered subject, as `subject` gives it."""
         raise NotImplementedError
 
     def effect_values(self, name: str, strength: float) -> dict[str, float]:

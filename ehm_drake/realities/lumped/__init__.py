@@ -74,10 +74,15 @@ class LumpedReality(Reality):
     def subject(self, seed: int) -> dict[str, Any]:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise RealityError(f"subject seed must be a non-negative integer, got {seed!r}")
-        factors = par.draw_factors(int(seed))
+        return self._subject(int(seed), par.SPREAD, par.draw_factors(int(seed)))
+
+    def nominal_subject(self) -> dict[str, Any]:
+        """The unscattered subject (every factor 1)."""
+        return self._subject(None, 0.0, {k: 1.0 for k in par.scattered_names()})
+
+    def _subject(self, seed, spread: float, factors: dict) -> dict[str, Any]:
         values = par.apply_factors(factors)
-        return {"reality": self.name, "seed": int(seed), "spread": par.SPREAD,
-                "factors": factors,
+        return {"reality": self.name, "seed": seed, "spread": spread, "factors": factors,
                 "values": {k: list(values[k]) if isinstance(values[k], tuple) else values[k]
                            for k in factors},
                 "body_mass_kg": float(make_plan(values).total_mass)}
