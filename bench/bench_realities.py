@@ -16,8 +16,8 @@ import argparse
 import time
 
 from ehm_drake import jit
-from ehm_drake.realities import get_reality
-from ehm_drake.signals import make_seat_signal
+from ehm_drake.realities import RealityError, get_reality
+from ehm_drake.signals import SignalError, make_seat_signal
 
 
 def main() -> None:
@@ -29,14 +29,17 @@ def main() -> None:
     a = ap.parse_args()
     print(f"compiled laws: {'yes' if jit.available() else 'no (NumPy laws)'}")
     for name in a.reality.split(","):
-        reality = get_reality(name.strip())
-        h = reality.time_step
+        try:
+            reality = get_reality(name.strip())
+            h = reality.time_step
+            signal = make_seat_signal("random", a.direction, 0.3, a.duration, 7, h, 0.5, 1.0)
+        except (RealityError, SignalError) as e:
+            ap.error(str(e))
         t0 = time.perf_counter()
         prepared = reality.prepare(reality.nominal_subject(), {})
         t_prep = time.perf_counter() - t0
         reality.run_test(prepared, make_seat_signal("random", a.direction, 0.3, 2.0, 7, h,
                                                     0.5, 1.0))
-        signal = make_seat_signal("random", a.direction, 0.3, a.duration, 7, h, 0.5, 1.0)
         t0 = time.perf_counter()
         reality.run_test(prepared, signal)
         wall = time.perf_counter() - t0
