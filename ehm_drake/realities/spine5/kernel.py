@@ -120,10 +120,8 @@ def _contact(x, P, Jp, anchors, dslow, dynamic, T, sc):
         else:
             new_anchor[i, 0] = Q[1]
             new_anchor[i, 1] = Q[2]
-        if slip:
-            ft0 = fs0 - 0.0
-            ft1 = fs1 - 0.0
-        else:
+        ft0, ft1 = fs0, fs1  # a slipping point's shear damping is off
+        if not slip:
             ft0 = fs0 - T[i, _CT] * Qd[1]
             ft1 = fs1 - T[i, _CT] * Qd[2]
         nft = math.hypot(ft0, ft1)

@@ -6,9 +6,9 @@ translates with the seat: every body feels the inertial load -m a_seat
 (generalized force -M J_com^T a_seat), so the seat motion needs no body of
 its own and the motion relative to the seat is exact.
 
-`Spine5Forces` (one Python `LeafSystem`, its contact law compiled by numba in
-`kernel` with the NumPy law as reference and fallback) computes, once per step,
-from the plant state and its own discrete state:
+`Spine5Forces` (one Python `LeafSystem`, its contact and muscle laws compiled
+by numba in `kernel` with the NumPy laws as reference and fallback) computes,
+once per step, from the plant state and its own discrete state:
 
 * seat contact: unilateral linear spring-dampers normal to the pan, the
   back-rest pads and the floor at 33 skin points, with elastic-plastic
